@@ -1,0 +1,99 @@
+//! The paper's excitation: pulses of uncorrelated amplitudes, uniform in a torque range, held
+//! for random times. Seeded and reproducible on every target.
+//!
+//! The generator is SplitMix64 (Steele, Lea, Flood 2014), written out here (ten lines)
+//! rather than taken from `rand`: its sequence is fixed by this crate's tests, so an
+//! excitation made on the host with a seed is bit-for-bit the one the firmware makes.
+
+/// SplitMix64 pseudo-random generator.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SplitMix64 {
+    state: u64,
+}
+
+impl SplitMix64 {
+    /// A generator from a seed (any value).
+    pub const fn new(seed: u64) -> Self {
+        Self { state: seed }
+    }
+
+    /// Next 64 random bits.
+    pub fn next_u64(&mut self) -> u64 {
+        self.state = self.state.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.state;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+
+    /// Uniform in [0, 1) with 53 random bits.
+    pub fn next_f64(&mut self) -> f64 {
+        (self.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
+    }
+
+    /// Uniform in [lo, hi).
+    pub fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
+        lo + (hi - lo) * self.next_f64()
+    }
+}
+
+/// One pulse: a torque reference held for a time.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Pulse {
+    /// Torque reference, % of nominal torque.
+    pub torque_ref_pct: f64,
+    /// How long it is held, s.
+    pub hold_s: f64,
+}
+
+/// Pulses with amplitudes uniform in `[min_pct, max_pct)` and holds uniform in
+/// `[min_hold_s, max_hold_s)`, optionally rounded up to a multiple of a sample period.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PulseTrain {
+    rng: SplitMix64,
+    /// Lowest amplitude, % (paper: 5).
+    pub min_pct: f64,
+    /// Highest amplitude, % (paper: 85).
+    pub max_pct: f64,
+    /// Shortest hold, s.
+    pub min_hold_s: f64,
+    /// Longest hold, s.
+    pub max_hold_s: f64,
+    /// If > 0, holds are rounded to a whole number (≥ 1) of this period, s.
+    pub period_s: f64,
+}
+
+impl PulseTrain {
+    /// The paper's range 5..85 %, holds of 0.5..3 s, no rounding.
+    pub const fn paper(seed: u64) -> Self {
+        Self {
+            rng: SplitMix64::new(seed),
+            min_pct: 5.0,
+            max_pct: 85.0,
+            min_hold_s: 0.5,
+            max_hold_s: 3.0,
+            period_s: 0.0,
+        }
+    }
+
+    /// Next pulse.
+    pub fn next_pulse(&mut self) -> Pulse {
+        let torque_ref_pct = self.rng.uniform(self.min_pct, self.max_pct);
+        let mut hold_s = self.rng.uniform(self.min_hold_s, self.max_hold_s);
+        if self.period_s > 0.0 {
+            let n = libm::round(hold_s / self.period_s).max(1.0);
+            hold_s = n * self.period_s;
+        }
+        Pulse {
+            torque_ref_pct,
+            hold_s,
+        }
+    }
+}
+
+impl Iterator for PulseTrain {
+    type Item = Pulse;
+    fn next(&mut self) -> Option<Pulse> {
+        Some(self.next_pulse())
+    }
+}

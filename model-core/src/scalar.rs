@@ -1,0 +1,113 @@
+//! One code path for `f32` (the MCU) and `f64` (the host) through a small scalar trait.
+//!
+//! Only `sqrt` and `abs` need a maths library; both come from `libm` (pure Rust, no_std, the
+//! same routines on the host and the target, correctly rounded `sqrt`). `micromath` was not
+//! chosen: its `sqrt` is an approximation (~5 % error bound documented), far outside the
+//! 1e-4 budget of the f32 model. `sqrt` is not on the hot path: the flow solver only needs
+//! it when the flow-balance cubic is not monotone, which never happens with the paper's
+//! coefficients inside the fitted range (see [`crate::flow`]).
+
+use core::fmt::Debug;
+use core::ops::{Add, AddAssign, Div, Mul, Neg, Sub};
+
+/// A real scalar: implemented for `f32` and `f64`.
+pub trait Real:
+    Copy
+    + Debug
+    + PartialOrd
+    + Add<Output = Self>
+    + Sub<Output = Self>
+    + Mul<Output = Self>
+    + Div<Output = Self>
+    + Neg<Output = Self>
+    + AddAssign
+{
+    /// 0.
+    const ZERO: Self;
+    /// 1.
+    const ONE: Self;
+    /// Machine epsilon (distance from 1 to the next representable value).
+    const EPSILON: Self;
+    /// Conversion from `f64`, rounding to nearest.
+    fn from_f64(x: f64) -> Self;
+    /// Exact conversion to `f64`.
+    fn to_f64(self) -> f64;
+    /// Square root (correctly rounded, `libm`); NaN for negative input.
+    fn sqrt(self) -> Self;
+    /// Absolute value.
+    fn abs(self) -> Self;
+    /// `true` unless NaN or infinite.
+    fn is_finite(self) -> bool;
+    /// The larger of two values (the non-NaN one if one is NaN).
+    fn max(self, other: Self) -> Self;
+    /// The smaller of two values (the non-NaN one if one is NaN).
+    fn min(self, other: Self) -> Self;
+}
+
+impl Real for f32 {
+    const ZERO: Self = 0.0;
+    const ONE: Self = 1.0;
+    const EPSILON: Self = f32::EPSILON;
+    #[inline]
+    fn from_f64(x: f64) -> Self {
+        x as f32
+    }
+    #[inline]
+    fn to_f64(self) -> f64 {
+        self as f64
+    }
+    #[inline]
+    fn sqrt(self) -> Self {
+        libm::sqrtf(self)
+    }
+    #[inline]
+    fn abs(self) -> Self {
+        libm::fabsf(self)
+    }
+    #[inline]
+    fn is_finite(self) -> bool {
+        f32::is_finite(self)
+    }
+    #[inline]
+    fn max(self, other: Self) -> Self {
+        f32::max(self, other)
+    }
+    #[inline]
+    fn min(self, other: Self) -> Self {
+        f32::min(self, other)
+    }
+}
+
+impl Real for f64 {
+    const ZERO: Self = 0.0;
+    const ONE: Self = 1.0;
+    const EPSILON: Self = f64::EPSILON;
+    #[inline]
+    fn from_f64(x: f64) -> Self {
+        x
+    }
+    #[inline]
+    fn to_f64(self) -> f64 {
+        self
+    }
+    #[inline]
+    fn sqrt(self) -> Self {
+        libm::sqrt(self)
+    }
+    #[inline]
+    fn abs(self) -> Self {
+        libm::fabs(self)
+    }
+    #[inline]
+    fn is_finite(self) -> bool {
+        f64::is_finite(self)
+    }
+    #[inline]
+    fn max(self, other: Self) -> Self {
+        f64::max(self, other)
+    }
+    #[inline]
+    fn min(self, other: Self) -> Self {
+        f64::min(self, other)
+    }
+}

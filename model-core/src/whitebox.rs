@@ -1,0 +1,408 @@
+//! The white-box bench: one ODE in speed with the flow loop solved at every evaluation.
+
+use crate::equations::{
+    electromagnetic_torque_pct, load_torque_pct, pipe_loss_mca, pump_head_mca,
+    speed_derivative_rpm_per_s, valve_pressure_mca, CubicInFlow,
+};
+use crate::error::BenchError;
+use crate::flow::{balance_cubic, solve_flow};
+use crate::params::{
+    BenchParams, FITTED_FLOW_MAX_LPS, FITTED_SPEED_MAX_RPM, FITTED_SPEED_MIN_RPM, RPM_PER_RAD_S,
+};
+use crate::scalar::Real;
+
+/// Largest integration step accepted, s. RK4 is stable up to ≈ 0.6 s at the bench's fastest
+/// time constant (≈ 0.22 s) and Euler up to ≈ 0.44 s; 0.1 s keeps every scheme well inside.
+pub const MAX_STEP_S: f64 = 0.1;
+/// Upper end of the steady-state search, rpm.
+pub const STEADY_SEARCH_MAX_RPM: f64 = 6000.0;
+/// Speed increment of the steady-state scan, rpm (the scan finds the lowest equilibrium, the
+/// one the bench settles at from rest).
+pub const STEADY_SCAN_STEP_RPM: f64 = 25.0;
+
+/// Fixed-step integration scheme; the torque reference is held over a step.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Scheme {
+    /// Classic 4th-order Runge-Kutta: 3 flow solves per step plus 1 for the new state.
+    #[default]
+    Rk4,
+    /// Heun (explicit trapezoid, 2nd order): 1 + 1 flow solves per step.
+    Heun,
+    /// Forward Euler (1st order): 1 flow solve per step.
+    Euler,
+}
+
+/// The integrator's state: small, `Copy`, owned by the caller.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BenchState<T> {
+    /// Motor/pump speed, rpm, ≥ 0.
+    pub speed_rpm: T,
+    /// Flow at `speed_rpm`, l/s (the solution of the flow loop, kept for the next warm start).
+    pub flow_lps: T,
+    /// Torque reference that acted over the last step, % of nominal.
+    pub torque_ref_pct: T,
+    /// Kahan compensation of `speed_rpm`: keeps tiny f32 increments (small steps near
+    /// equilibrium) from being rounded away.
+    speed_carry_rpm: T,
+}
+
+impl<T: Real> BenchState<T> {
+    /// The bench at rest: zero speed, zero flow, zero torque reference.
+    pub fn at_rest() -> Self {
+        Self {
+            speed_rpm: T::ZERO,
+            flow_lps: T::ZERO,
+            torque_ref_pct: T::ZERO,
+            speed_carry_rpm: T::ZERO,
+        }
+    }
+}
+
+/// Which fitted range a signal is outside of (the result is still computed: extrapolated).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Extrapolation {
+    /// Speed below 351 rpm (11.7π rad/s).
+    pub speed_below: bool,
+    /// Speed above 1749 rpm (58.3π rad/s).
+    pub speed_above: bool,
+    /// Flow above 27.8 l/s.
+    pub flow_above: bool,
+}
+
+impl Extrapolation {
+    /// `true` if any signal is outside the range the polynomials were fitted on.
+    pub fn any(&self) -> bool {
+        self.speed_below || self.speed_above || self.flow_above
+    }
+}
+
+/// Every signal of the bench at one state: the paper's "other signals for free".
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Signals<T> {
+    /// Speed, rpm.
+    pub speed_rpm: T,
+    /// Speed, rad/s.
+    pub speed_rad_s: T,
+    /// Flow, l/s.
+    pub flow_lps: T,
+    /// Outlet pressure `Hs`, mca (−c with no flow).
+    pub pressure_mca: T,
+    /// Pump head `F_H(ω, Q)`, eq. (5), mca. Equals pipe loss + `Hs` while there is flow.
+    pub pump_head_mca: T,
+    /// Pipe loss `k1 Q²`, eq. (7), mca.
+    pub pipe_loss_mca: T,
+    /// Electromagnetic torque `Te(u)`, eq. (4), % of nominal.
+    pub electromagnetic_torque_pct: T,
+    /// Load torque `F_T(ω, Q)`, eq. (6), % of nominal.
+    pub load_torque_pct: T,
+    /// Outside the fitted range?
+    pub extrapolation: Extrapolation,
+}
+
+/// The white-box bench model (coefficients only; the state is a separate [`BenchState`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WhiteBox<T> {
+    params: BenchParams<T>,
+    /// k1 + k2², mca/(l/s)².
+    system_k: T,
+    /// rpm/s per % of torque surplus.
+    accel: T,
+}
+
+impl<T: Real> WhiteBox<T> {
+    /// Validates `params` and builds the model.
+    pub fn new(params: BenchParams<T>) -> Result<Self, BenchError> {
+        params.validate()?;
+        let accel = T::from_f64(
+            params.nominal_torque_nm.to_f64() / 100.0 / params.inertia_kg_m2.to_f64()
+                * RPM_PER_RAD_S,
+        );
+        Ok(Self {
+            system_k: params.pipe_k1 + params.valve_k2 * params.valve_k2,
+            accel,
+            params,
+        })
+    }
+
+    /// The paper's bench.
+    pub fn paper() -> Self {
+        match Self::new(BenchParams::paper()) {
+            Ok(m) => m,
+            // The paper's values pass validation (tested); this arm is unreachable.
+            Err(_) => Self {
+                params: BenchParams::paper(),
+                system_k: T::ZERO,
+                accel: T::ZERO,
+            },
+        }
+    }
+
+    /// The parameters in use.
+    pub fn params(&self) -> &BenchParams<T> {
+        &self.params
+    }
+
+    /// Changes the load: valve coefficient `k2` (√mca/(l/s), finite, ≥ 0) and static head `c`
+    /// (mca, finite). On error nothing changes.
+    pub fn set_load(&mut self, valve_k2: T, static_head_c_mca: T) -> Result<(), BenchError> {
+        if !valve_k2.is_finite() || !static_head_c_mca.is_finite() {
+            return Err(BenchError::InvalidParameter("non-finite load"));
+        }
+        if valve_k2 < T::ZERO {
+            return Err(BenchError::InvalidParameter("k1 and k2 must be >= 0"));
+        }
+        self.params.valve_k2 = valve_k2;
+        self.params.static_head_c_mca = static_head_c_mca;
+        self.system_k = self.params.pipe_k1 + valve_k2 * valve_k2;
+        Ok(())
+    }
+
+    /// Flow (l/s) at `speed_rpm`, solving the flow loop with a warm start (any guess).
+    #[inline]
+    pub fn flow_at(&self, speed_rpm: T, warm_start_lps: T) -> T {
+        solve_flow(&self.balance(speed_rpm), warm_start_lps).flow_lps
+    }
+
+    /// The flow-balance cubic at `speed_rpm` (see [`crate::flow`]).
+    #[inline]
+    pub fn balance(&self, speed_rpm: T) -> CubicInFlow<T> {
+        balance_cubic(
+            &self.params.alpha,
+            self.system_k,
+            self.params.static_head_c_mca,
+            speed_rpm,
+        )
+    }
+
+    /// Checks a torque reference: finite and within 0..=100 %.
+    pub fn check_torque(torque_ref_pct: T) -> Result<(), BenchError> {
+        if !torque_ref_pct.is_finite() {
+            Err(BenchError::NonFiniteTorque)
+        } else if torque_ref_pct < T::ZERO || torque_ref_pct > T::from_f64(100.0) {
+            Err(BenchError::TorqueOutOfRange)
+        } else {
+            Ok(())
+        }
+    }
+
+    /// dω/dt in rpm/s at `speed_rpm` with flow `flow_lps` and electromagnetic torque `te_pct`.
+    #[inline]
+    fn derivative(&self, te_pct: T, speed_rpm: T, flow_lps: T) -> T {
+        speed_derivative_rpm_per_s(
+            te_pct,
+            load_torque_pct(&self.params.beta, speed_rpm, flow_lps),
+            self.accel,
+        )
+    }
+
+    /// Flow and dω/dt at `speed_rpm`, the flow warm-started from `warm_lps`.
+    #[inline]
+    fn stage(&self, te_pct: T, speed_rpm: T, warm_lps: T) -> (T, T) {
+        let q = self.flow_at(speed_rpm, warm_lps);
+        (q, self.derivative(te_pct, speed_rpm, q))
+    }
+
+    /// Advances `state` by one step of `dt_s` seconds (finite, 0 < dt ≤ [`MAX_STEP_S`]) with the
+    /// torque reference `torque_ref_pct` (0..=100 %) held over the step.
+    ///
+    /// On error the state is unchanged.
+    pub fn step(
+        &self,
+        state: &mut BenchState<T>,
+        torque_ref_pct: T,
+        dt_s: T,
+        scheme: Scheme,
+    ) -> Result<(), BenchError> {
+        Self::check_torque(torque_ref_pct)?;
+        if !dt_s.is_finite() || !(dt_s > T::ZERO) || dt_s > T::from_f64(MAX_STEP_S) {
+            return Err(BenchError::InvalidStep);
+        }
+        self.step_unchecked(state, torque_ref_pct, dt_s, scheme)
+    }
+
+    /// [`Self::step`] without the input checks (the caller has done them).
+    fn step_unchecked(
+        &self,
+        state: &mut BenchState<T>,
+        torque_ref_pct: T,
+        h: T,
+        scheme: Scheme,
+    ) -> Result<(), BenchError> {
+        let te = electromagnetic_torque_pct(&self.params.gamma, torque_ref_pct);
+        let w0 = state.speed_rpm;
+        let q0 = state.flow_lps;
+        let k1 = self.derivative(te, w0, q0);
+        let half = T::from_f64(0.5);
+        let increment = match scheme {
+            Scheme::Euler => h * k1,
+            Scheme::Heun => {
+                let (_, k2) = self.stage(te, w0 + h * k1, q0);
+                h * half * (k1 + k2)
+            }
+            Scheme::Rk4 => {
+                let (q2, k2) = self.stage(te, w0 + half * h * k1, q0);
+                let (q3, k3) = self.stage(te, w0 + half * h * k2, q2);
+                let (_, k4) = self.stage(te, w0 + h * k3, q3);
+                let two = T::from_f64(2.0);
+                h / T::from_f64(6.0) * (k1 + two * (k2 + k3) + k4)
+            }
+        };
+        // Kahan-compensated update of the speed.
+        let y = increment - state.speed_carry_rpm;
+        let w1 = w0 + y;
+        let carry = (w1 - w0) - y;
+        let q1 = self.flow_at(w1, q0);
+        if !w1.is_finite() || !q1.is_finite() || !carry.is_finite() {
+            return Err(BenchError::Diverged);
+        }
+        state.speed_rpm = w1;
+        state.speed_carry_rpm = carry;
+        state.flow_lps = q1;
+        state.torque_ref_pct = torque_ref_pct;
+        Ok(())
+    }
+
+    /// Holds `torque_ref_pct` for `duration_s` seconds (finite, ≥ 0), in the smallest number
+    /// of equal steps no longer than `max_step_s` (so that the end time is hit exactly).
+    ///
+    /// Returns the number of steps taken. On error the state is unchanged.
+    pub fn advance(
+        &self,
+        state: &mut BenchState<T>,
+        torque_ref_pct: T,
+        duration_s: f64,
+        max_step_s: f64,
+        scheme: Scheme,
+    ) -> Result<u64, BenchError> {
+        Self::check_torque(torque_ref_pct)?;
+        if !duration_s.is_finite()
+            || duration_s < 0.0
+            || !max_step_s.is_finite()
+            || !(max_step_s > 0.0)
+            || max_step_s > MAX_STEP_S
+        {
+            return Err(BenchError::InvalidStep);
+        }
+        if duration_s == 0.0 {
+            return Ok(0);
+        }
+        // Smallest n with duration/n ≤ max_step (with a relative slack of 1e-9 so that
+        // 0.05 s at 1 ms gives 50 steps, not 51, despite rounding).
+        let ratio = duration_s / max_step_s;
+        let mut n = libm::ceil(ratio) as u64;
+        if n > 1 && (n - 1) as f64 >= ratio * (1.0 - 1e-9) {
+            n -= 1;
+        }
+        let n = n.max(1);
+        let h = T::from_f64(duration_s / n as f64);
+        let mut next = *state;
+        for _ in 0..n {
+            self.step_unchecked(&mut next, torque_ref_pct, h, scheme)?;
+        }
+        *state = next;
+        Ok(n)
+    }
+
+    /// Every signal at `state` (pump head, pipe loss, torques, pressure, extrapolation flags).
+    pub fn signals(&self, state: &BenchState<T>) -> Signals<T> {
+        let w = state.speed_rpm;
+        let q = state.flow_lps;
+        let p = &self.params;
+        Signals {
+            speed_rpm: w,
+            speed_rad_s: w / T::from_f64(RPM_PER_RAD_S),
+            flow_lps: q,
+            pressure_mca: valve_pressure_mca(p.valve_k2, p.static_head_c_mca, q),
+            pump_head_mca: pump_head_mca(&p.alpha, w, q),
+            pipe_loss_mca: pipe_loss_mca(p.pipe_k1, q),
+            electromagnetic_torque_pct: electromagnetic_torque_pct(&p.gamma, state.torque_ref_pct),
+            load_torque_pct: load_torque_pct(&p.beta, w, q),
+            extrapolation: Extrapolation {
+                speed_below: w < T::from_f64(FITTED_SPEED_MIN_RPM),
+                speed_above: w > T::from_f64(FITTED_SPEED_MAX_RPM),
+                flow_above: q > T::from_f64(FITTED_FLOW_MAX_LPS),
+            },
+        }
+    }
+
+    /// Torque surplus `Te(u) − F_T(ω, Q(ω))`, % of nominal, and the flow at `speed_rpm`.
+    fn surplus(&self, te_pct: T, speed_rpm: T, warm_lps: T) -> (T, T) {
+        let q = self.flow_at(speed_rpm, warm_lps);
+        (te_pct - load_torque_pct(&self.params.beta, speed_rpm, q), q)
+    }
+
+    /// The steady state for a constant torque reference (0..=100 %): the lowest speed where
+    /// `Te(u) = F_T(ω, Q(ω))` with a falling surplus, i.e. where the bench settles from rest.
+    ///
+    /// A scan in [`STEADY_SCAN_STEP_RPM`] steps brackets it, bisection refines it to a few ulps.
+    pub fn steady_state(&self, torque_ref_pct: T) -> Result<BenchState<T>, BenchError> {
+        Self::check_torque(torque_ref_pct)?;
+        let te = electromagnetic_torque_pct(&self.params.gamma, torque_ref_pct);
+        let step = T::from_f64(STEADY_SCAN_STEP_RPM);
+        let limit = T::from_f64(STEADY_SEARCH_MAX_RPM);
+        let (mut lo, mut hi) = (T::ZERO, T::ZERO);
+        let (s0, mut q) = self.surplus(te, T::ZERO, T::ZERO);
+        if s0 <= T::ZERO {
+            // Cannot start from rest: the state at rest is the steady state.
+            return Ok(self.state_with(T::ZERO, q, torque_ref_pct));
+        }
+        let mut found = false;
+        while hi < limit {
+            lo = hi;
+            hi = hi + step;
+            let (s, q_hi) = self.surplus(te, hi, q);
+            q = q_hi;
+            if !s.is_finite() {
+                return Err(BenchError::NoSteadyState);
+            }
+            if s <= T::ZERO {
+                found = true;
+                break;
+            }
+        }
+        if !found {
+            return Err(BenchError::NoSteadyState);
+        }
+        let two = T::from_f64(2.0);
+        for _ in 0..200 {
+            let mid = (lo + hi) / two;
+            if !(mid > lo && mid < hi) {
+                break;
+            }
+            let (s, q_mid) = self.surplus(te, mid, q);
+            q = q_mid;
+            if s > T::ZERO {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        let w = (lo + hi) / two;
+        let q = self.flow_at(w, q);
+        Ok(self.state_with(w, q, torque_ref_pct))
+    }
+
+    fn state_with(&self, speed_rpm: T, flow_lps: T, torque_ref_pct: T) -> BenchState<T> {
+        BenchState {
+            speed_rpm,
+            flow_lps,
+            torque_ref_pct,
+            speed_carry_rpm: T::ZERO,
+        }
+    }
+
+    /// A state at `speed_rpm` (finite, ≥ 0) with its flow solved and the torque reference set,
+    /// e.g. to start a simulation from a measured speed.
+    pub fn state_at_speed(
+        &self,
+        speed_rpm: T,
+        torque_ref_pct: T,
+    ) -> Result<BenchState<T>, BenchError> {
+        Self::check_torque(torque_ref_pct)?;
+        if !speed_rpm.is_finite() || speed_rpm < T::ZERO {
+            return Err(BenchError::InvalidParameter("speed must be finite and >= 0"));
+        }
+        let q = self.flow_at(speed_rpm, T::ZERO);
+        Ok(self.state_with(speed_rpm, q, torque_ref_pct))
+    }
+}
