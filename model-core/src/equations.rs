@@ -124,3 +124,52 @@ pub fn speed_derivative_rpm_per_s<T: Real>(
 ) -> T {
     (electromagnetic_torque_pct - load_torque_pct) * accel_rpm_per_s_per_pct
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::params::*;
+
+    #[test]
+    fn te_is_almost_the_reference() {
+        assert_eq!(electromagnetic_torque_pct(&PAPER_GAMMA, 0.0), 2.244);
+        let te100 = electromagnetic_torque_pct(&PAPER_GAMMA, 100.0);
+        assert!((te100 - 101.044).abs() < 1e-3, "{te100}");
+        // "The nonlinearity is very small": within 3.5 points over the excitation range.
+        let worst = (5..=85)
+            .map(|u| (electromagnetic_torque_pct(&PAPER_GAMMA, u as f64) - u as f64).abs())
+            .fold(0.0, f64::max);
+        assert!(worst > 2.5 && worst < 3.5, "max |Te(u) - u| = {worst}");
+    }
+
+    #[test]
+    fn polynomial_matches_its_printed_form() {
+        let (w, q) = (1234.5, 17.25);
+        let a = PAPER_ALPHA;
+        let printed = a[0] * q * q * q
+            + a[1] * w * w * w
+            + a[2] * q * q * w
+            + a[3] * q * w * w
+            + a[4] * q * q
+            + a[5] * w * w
+            + a[6] * q * w
+            + a[7] * q
+            + a[8] * w
+            + a[9];
+        assert!((pump_head_mca(&a, w, q) - printed).abs() < 1e-12);
+        let c = CubicInFlow::from_poly(&PAPER_BETA, w);
+        let h = 1e-6;
+        let numeric = (c.eval(q + h) - c.eval(q - h)) / (2.0 * h);
+        assert!((c.slope(q) - numeric).abs() < 1e-6);
+    }
+
+    #[test]
+    fn valve_relation_inverts() {
+        for q in [0.5, 5.0, 19.2, 27.8] {
+            let hs = valve_pressure_mca(PAPER_K2, PAPER_C_MCA, q);
+            assert!((valve_flow_lps(PAPER_K2, PAPER_C_MCA, hs) - q).abs() < 1e-12);
+        }
+        assert_eq!(valve_flow_lps(PAPER_K2, PAPER_C_MCA, -1.0), 0.0);
+        assert_eq!(pipe_loss_mca(PAPER_K1, 10.0), 2.5);
+    }
+}

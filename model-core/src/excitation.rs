@@ -97,3 +97,36 @@ impl Iterator for PulseTrain {
         Some(self.next_pulse())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn reproducible_and_in_range() {
+        let a: [Pulse; 64] = core::array::from_fn({
+            let mut t = PulseTrain::paper(42);
+            move |_| t.next_pulse()
+        });
+        let mut t = PulseTrain::paper(42);
+        let mut mean = 0.0;
+        for p in a {
+            assert_eq!(p, t.next_pulse());
+            assert!((5.0..85.0).contains(&p.torque_ref_pct) && (0.5..3.0).contains(&p.hold_s));
+            mean += p.torque_ref_pct / 64.0;
+        }
+        assert!((mean - 45.0).abs() < 8.0, "mean {mean}");
+        // SplitMix64's published first output for seed 0.
+        assert_eq!(SplitMix64::new(0).next_u64(), 0xE220_A839_7B1D_CDAF);
+    }
+
+    #[test]
+    fn holds_round_to_the_period() {
+        let mut t = PulseTrain::paper(1);
+        t.period_s = 0.05;
+        for _ in 0..100 {
+            let h = t.next_pulse().hold_s / 0.05;
+            assert!((h - libm::round(h)).abs() < 1e-9 && h >= 1.0);
+        }
+    }
+}

@@ -129,11 +129,13 @@ pub fn solve_flow<T: Real>(g: &CubicInFlow<T>, warm_start_lps: T) -> FlowSolutio
         }
         let slope = g.slope(q);
         let newton = q - value / slope;
+        // Without an upper bound, grow at most geometrically (a slope near zero, e.g. at the
+        // local maximum that starts the branch, would otherwise throw Newton far out).
         let inside = newton.is_finite()
             && newton > lo
             && match hi {
                 Some(h) => newton < h,
-                None => true,
+                None => newton <= two * q.max(T::ONE),
             };
         let next = if inside {
             newton
@@ -157,5 +159,110 @@ pub fn solve_flow<T: Real>(g: &CubicInFlow<T>, warm_start_lps: T) -> FlowSolutio
         flow_lps: q.max(T::ZERO),
         iterations,
         converged: false,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// −s (Q − r1)(Q − r2)(Q − r3) expanded.
+    fn from_roots(s: f64, r: [f64; 3]) -> CubicInFlow<f64> {
+        CubicInFlow {
+            c3: -s,
+            c2: s * (r[0] + r[1] + r[2]),
+            c1: -s * (r[0] * r[1] + r[0] * r[2] + r[1] * r[2]),
+            c0: s * r[0] * r[1] * r[2],
+        }
+    }
+
+    const WARM: [f64; 7] = [0.0, 1.0, 3.0, 7.5, 100.0, -5.0, f64::NAN];
+
+    #[test]
+    fn largest_of_three_positive_roots() {
+        let g = from_roots(1e-3, [2.0, 5.0, 9.0]);
+        for w in WARM {
+            let s = solve_flow(&g, w);
+            assert!((s.flow_lps - 9.0).abs() < 1e-12 && s.converged, "warm {w}: {s:?}");
+        }
+    }
+
+    #[test]
+    fn root_pair_above_a_negative_start() {
+        // g(0) < 0 but the pump curve rises above the system curve between 2 and 5 l/s.
+        let g = from_roots(1.0, [2.0, 5.0, -1.0]);
+        assert!(g.c0 < 0.0);
+        for w in WARM {
+            assert!((solve_flow(&g, w).flow_lps - 5.0).abs() < 1e-12, "warm {w}");
+        }
+    }
+
+    #[test]
+    fn single_root_with_a_hump_below_zero() {
+        // −(Q − 1)((Q − 5)² + 0.5): one real root at 1, local max below zero.
+        let g = CubicInFlow {
+            c3: -1.0,
+            c2: 11.0,
+            c1: -35.5,
+            c0: 25.5,
+        };
+        assert!(g.eval(1.0).abs() < 1e-12);
+        for w in WARM {
+            assert!((solve_flow(&g, w).flow_lps - 1.0).abs() < 1e-12, "warm {w}");
+        }
+    }
+
+    #[test]
+    fn no_positive_root_gives_zero() {
+        let g = from_roots(2.0, [-1.0, -2.0, -3.0]);
+        for w in WARM {
+            let s = solve_flow(&g, w);
+            assert_eq!((s.flow_lps, s.iterations), (0.0, 0));
+        }
+        // Non-finite or non-physical coefficients: zero, no panic.
+        for bad in [f64::NAN, f64::INFINITY] {
+            let mut g = from_roots(1.0, [1.0, 2.0, 3.0]);
+            g.c1 = bad;
+            assert_eq!(solve_flow(&g, 1.0).flow_lps, 0.0);
+        }
+        let mut g = from_roots(1.0, [1.0, 2.0, 3.0]);
+        g.c3 = 0.0;
+        assert_eq!(solve_flow(&g, 1.0).flow_lps, 0.0);
+    }
+
+    #[test]
+    fn paper_balance_warm_started_converges_in_few_iterations() {
+        let p = crate::BenchParams::<f64>::paper();
+        let k = p.pipe_k1 + p.valve_k2 * p.valve_k2;
+        let mut q = 0.0;
+        let mut worst = 0;
+        for i in 0..=2000 {
+            let w = i as f64;
+            let g = balance_cubic(&p.alpha, k, p.static_head_c_mca, w);
+            let s = solve_flow(&g, q);
+            assert!(s.converged && s.flow_lps >= 0.0);
+            if s.flow_lps > 0.0 {
+                assert!(g.eval(s.flow_lps).abs() < 1e-12 * g.magnitude(s.flow_lps));
+            }
+            if q > 0.0 {
+                worst = worst.max(s.iterations);
+            }
+            q = s.flow_lps;
+        }
+        // 1 rpm apart, the warm start is close: Newton needs a handful of iterations.
+        assert!(worst <= 5, "worst {worst} iterations");
+    }
+
+    #[test]
+    fn f32_flow_close_to_f64() {
+        let p64 = crate::BenchParams::<f64>::paper();
+        let p32 = crate::BenchParams::<f32>::paper();
+        for i in 0..=40 {
+            let w = 50.0 * i as f64;
+            let g64 = balance_cubic(&p64.alpha, 0.025 + 0.1082 * 0.1082, 0.252, w);
+            let g32 = balance_cubic(&p32.alpha, 0.025 + 0.1082f32 * 0.1082, 0.252, w as f32);
+            let (a, b) = (solve_flow(&g64, 0.0).flow_lps, solve_flow(&g32, 0.0).flow_lps);
+            assert!((a - b as f64).abs() <= 2e-6 * a.max(1.0), "w={w}: {a} vs {b}");
+        }
     }
 }

@@ -42,7 +42,7 @@
 //! let s = bench.signals(&state);
 //! assert!(s.flow_lps > 0.0 && s.pressure_mca > 0.0);
 //! ```
-#![no_std]
+#![cfg_attr(not(test), no_std)]
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 

@@ -406,3 +406,69 @@ impl<T: Real> WhiteBox<T> {
         Ok(self.state_with(speed_rpm, q, torque_ref_pct))
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn paper_parameters_validate() {
+        assert!(BenchParams::<f32>::paper().validate().is_ok());
+        assert!(BenchParams::<f64>::paper().validate().is_ok());
+        let mut p = BenchParams::<f64>::paper();
+        p.alpha[0] = 1e-3;
+        assert!(WhiteBox::new(p).is_err());
+        p = BenchParams::paper();
+        p.inertia_kg_m2 = 0.0;
+        assert!(WhiteBox::new(p).is_err());
+        p = BenchParams::paper();
+        p.beta[3] = f64::NAN;
+        assert!(WhiteBox::new(p).is_err());
+    }
+
+    #[test]
+    fn advance_hits_the_end_time_with_few_equal_steps() {
+        let b = WhiteBox::<f64>::paper();
+        let mut s = b.steady_state(20.0).unwrap();
+        assert_eq!(b.advance(&mut s, 30.0, 0.05, 1e-3, Scheme::Rk4), Ok(50));
+        assert_eq!(b.advance(&mut s, 30.0, 0.0015, 1e-3, Scheme::Rk4), Ok(2));
+        assert_eq!(b.advance(&mut s, 30.0, 0.0, 1e-3, Scheme::Rk4), Ok(0));
+        assert_eq!(b.advance(&mut s, 30.0, 1.0, 0.3, Scheme::Rk4), Err(BenchError::InvalidStep));
+        assert_eq!(b.advance(&mut s, 30.0, -1.0, 1e-3, Scheme::Rk4), Err(BenchError::InvalidStep));
+    }
+
+    #[test]
+    fn opening_the_valve_raises_flow_and_lowers_pressure() {
+        let mut b = WhiteBox::<f64>::paper();
+        let half = b.signals(&b.steady_state(50.0).unwrap());
+        b.set_load(0.08, 0.252).unwrap();
+        let open = b.signals(&b.steady_state(50.0).unwrap());
+        assert!(open.flow_lps > half.flow_lps && open.pressure_mca < half.pressure_mca);
+    }
+
+    #[test]
+    fn kahan_keeps_small_f32_increments() {
+        // 1e-5 s steps near equilibrium: the increments are below half an ulp of the speed,
+        // which plain summation would drop. The compensated state still moves as f64 does.
+        let b32 = WhiteBox::<f32>::paper();
+        let b64 = WhiteBox::<f64>::paper();
+        let mut s32 = b32.steady_state(50.0).unwrap();
+        let mut s64 = b64.steady_state(50.0).unwrap();
+        b32.advance(&mut s32, 50.2, 0.5, 1e-5, Scheme::Rk4).unwrap();
+        b64.advance(&mut s64, 50.2, 0.5, 1e-5, Scheme::Rk4).unwrap();
+        let rel = (s32.speed_rpm as f64 / s64.speed_rpm - 1.0).abs();
+        assert!(rel < 1e-6, "{rel}");
+    }
+
+    #[test]
+    fn signals_hold_the_head_balance_and_flags() {
+        let b = WhiteBox::<f64>::paper();
+        let s = b.signals(&b.steady_state(50.0).unwrap());
+        assert!((s.pump_head_mca - s.pipe_loss_mca - s.pressure_mca).abs() < 1e-9);
+        assert!((s.electromagnetic_torque_pct - s.load_torque_pct).abs() < 1e-9);
+        assert!((s.speed_rad_s * 30.0 / core::f64::consts::PI - s.speed_rpm).abs() < 1e-9);
+        assert!(!s.extrapolation.any());
+        let low = b.signals(&b.steady_state(5.0).unwrap());
+        assert!(low.extrapolation.speed_below && !low.extrapolation.speed_above);
+    }
+}
