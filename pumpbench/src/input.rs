@@ -1,0 +1,245 @@
+//! Reading bench CSV files: every error names the file, the line and the column.
+
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+/// A bad input file, or an I/O failure. Displayed as one line:
+/// `FILE:LINE:COLUMN: what is wrong` (line and column 1-based, column omitted when the
+/// error is about a whole row or the file).
+#[derive(Debug, Clone, PartialEq)]
+pub struct InputError {
+    /// The file.
+    pub path: PathBuf,
+    /// 1-based line, if known.
+    pub line: Option<u64>,
+    /// 1-based column and its header name, if known.
+    pub column: Option<(usize, String)>,
+    /// What is wrong.
+    pub message: String,
+}
+
+impl fmt::Display for InputError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}", self.path.display())?;
+        if let Some(line) = self.line {
+            write!(f, ":{line}")?;
+        }
+        if let Some((col, name)) = &self.column {
+            write!(f, ":{col} ({name})")?;
+        }
+        write!(f, ": {}", self.message)
+    }
+}
+
+impl std::error::Error for InputError {}
+
+/// A CSV with a header row, from which some columns are read as finite numbers.
+pub struct NumericColumns {
+    /// One row per data record: the requested columns, in the requested order.
+    pub rows: Vec<Vec<f64>>,
+    /// 1-based line of each row (for later error messages).
+    pub lines: Vec<u64>,
+    /// 1-based column index of each requested column.
+    pub columns: Vec<usize>,
+}
+
+/// Reads `path`, requiring the named columns (any order, other columns ignored) and parsing
+/// every cell of them as a finite number. Blank lines are skipped.
+pub fn read_columns(path: &Path, names: &[&str]) -> Result<NumericColumns, InputError> {
+    let err = |line: Option<u64>, column: Option<(usize, String)>, message: String| InputError {
+        path: path.to_path_buf(),
+        line,
+        column,
+        message,
+    };
+    let file = std::fs::File::open(path)
+        .map_err(|e| err(None, None, format!("cannot open: {e}")))?;
+    let mut reader = csv::ReaderBuilder::new()
+        .has_headers(true)
+        .trim(csv::Trim::All)
+        .from_reader(std::io::BufReader::new(file));
+    let header = reader
+        .headers()
+        .map_err(|e| err(Some(1), None, format!("cannot read the header: {e}")))?
+        .clone();
+    if header.is_empty() || header.iter().all(|h| h.is_empty()) {
+        return Err(err(
+            Some(1),
+            None,
+            format!("empty file: expected a header row with {}", names.join(",")),
+        ));
+    }
+    let mut columns = Vec::with_capacity(names.len());
+    for name in names {
+        match header.iter().position(|h| h == *name) {
+            Some(i) => columns.push(i),
+            None => {
+                return Err(err(
+                    Some(1),
+                    None,
+                    format!(
+                        "missing column '{name}' (header is '{}')",
+                        header.iter().collect::<Vec<_>>().join(",")
+                    ),
+                ))
+            }
+        }
+    }
+    let mut rows = Vec::new();
+    let mut lines = Vec::new();
+    let mut record = csv::StringRecord::new();
+    loop {
+        match reader.read_record(&mut record) {
+            Ok(false) => break,
+            Ok(true) => {}
+            Err(e) => {
+                let line = e.position().map(|p| p.line());
+                return Err(err(line, None, format!("malformed row: {}", csv_kind(&e))));
+            }
+        }
+        let line = record.position().map_or(0, |p| p.line());
+        let mut row = Vec::with_capacity(columns.len());
+        for (&c, name) in columns.iter().zip(names) {
+            let cell = record.get(c).unwrap_or("");
+            let value: f64 = cell.parse().map_err(|_| {
+                err(
+                    Some(line),
+                    Some((c + 1, name.to_string())),
+                    format!("'{cell}' is not a number"),
+                )
+            })?;
+            if !value.is_finite() {
+                return Err(err(
+                    Some(line),
+                    Some((c + 1, name.to_string())),
+                    format!("'{cell}' is not a finite number"),
+                ));
+            }
+            row.push(value);
+        }
+        rows.push(row);
+        lines.push(line);
+    }
+    if rows.is_empty() {
+        return Err(err(Some(2), None, "no data rows after the header".into()));
+    }
+    Ok(NumericColumns {
+        rows,
+        lines,
+        columns: columns.iter().map(|c| c + 1).collect(),
+    })
+}
+
+fn csv_kind(e: &csv::Error) -> String {
+    match e.kind() {
+        csv::ErrorKind::UnequalLengths {
+            expected_len, len, ..
+        } => format!("{len} fields where the header has {expected_len}"),
+        csv::ErrorKind::Utf8 { .. } => "not valid UTF-8".into(),
+        other => format!("{other:?}"),
+    }
+}
+
+/// A torque-reference input: `(t_s, torque_ref_pct)` rows, times strictly increasing,
+/// torques within 0..=100 %.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TorqueInput {
+    /// Times, s.
+    pub t_s: Vec<f64>,
+    /// Torque references, % of nominal.
+    pub torque_ref_pct: Vec<f64>,
+}
+
+/// Reads a `t_s,torque_ref_pct` file (other columns ignored) and checks it.
+pub fn read_torque_input(path: &Path) -> Result<TorqueInput, InputError> {
+    let data = read_columns(path, &["t_s", "torque_ref_pct"])?;
+    let mut input = TorqueInput {
+        t_s: Vec::with_capacity(data.rows.len()),
+        torque_ref_pct: Vec::with_capacity(data.rows.len()),
+    };
+    for (row, &line) in data.rows.iter().zip(&data.lines) {
+        let (t, u) = (row[0], row[1]);
+        if let Some(&prev) = input.t_s.last() {
+            if t <= prev {
+                return Err(InputError {
+                    path: path.to_path_buf(),
+                    line: Some(line),
+                    column: Some((data.columns[0], "t_s".into())),
+                    message: format!("time {t} s is not after the previous row's {prev} s"),
+                });
+            }
+        }
+        if !(0.0..=100.0).contains(&u) {
+            return Err(InputError {
+                path: path.to_path_buf(),
+                line: Some(line),
+                column: Some((data.columns[1], "torque_ref_pct".into())),
+                message: format!("torque reference {u} % is outside 0..100 %"),
+            });
+        }
+        input.t_s.push(t);
+        input.torque_ref_pct.push(u);
+    }
+    Ok(input)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::io::Write;
+
+    fn file(text: &str) -> tempfile::NamedTempFile {
+        let mut f = tempfile::NamedTempFile::new().unwrap();
+        f.write_all(text.as_bytes()).unwrap();
+        f
+    }
+
+    fn error_of(text: &str) -> String {
+        let f = file(text);
+        let e = read_torque_input(f.path()).unwrap_err();
+        e.to_string().replace(&f.path().display().to_string(), "F")
+    }
+
+    #[test]
+    fn good_file_with_extra_columns_and_any_order() {
+        let f = file("note,torque_ref_pct,t_s\na,10,0\nb,20.5,0.5\n");
+        let i = read_torque_input(f.path()).unwrap();
+        assert_eq!(i.t_s, vec![0.0, 0.5]);
+        assert_eq!(i.torque_ref_pct, vec![10.0, 20.5]);
+    }
+
+    #[test]
+    fn bad_files_name_line_and_column() {
+        assert_eq!(error_of(""), "F:1: empty file: expected a header row with t_s,torque_ref_pct");
+        assert_eq!(error_of("t_s,torque_ref_pct\n"), "F:2: no data rows after the header");
+        assert_eq!(
+            error_of("t_s,torque\n0,1\n"),
+            "F:1: missing column 'torque_ref_pct' (header is 't_s,torque')"
+        );
+        assert_eq!(
+            error_of("t_s,torque_ref_pct\n0,10\n1,abc\n"),
+            "F:3:2 (torque_ref_pct): 'abc' is not a number"
+        );
+        assert_eq!(
+            error_of("t_s,torque_ref_pct\n0,10\n1,10\n0.5,10\n"),
+            "F:4:1 (t_s): time 0.5 s is not after the previous row's 1 s"
+        );
+        assert_eq!(
+            error_of("t_s,torque_ref_pct\n0,10\n1,10\n1,10\n"),
+            "F:4:1 (t_s): time 1 s is not after the previous row's 1 s"
+        );
+        assert_eq!(
+            error_of("t_s,torque_ref_pct\n0,101\n"),
+            "F:2:2 (torque_ref_pct): torque reference 101 % is outside 0..100 %"
+        );
+        assert_eq!(
+            error_of("t_s,torque_ref_pct\n0,NaN\n"),
+            "F:2:2 (torque_ref_pct): 'NaN' is not a finite number"
+        );
+        assert_eq!(
+            error_of("t_s,torque_ref_pct\n0,1\n1,2,3\n"),
+            "F:3: malformed row: 3 fields where the header has 2"
+        );
+        assert!(error_of("t_s,torque_ref_pct\n0,").contains("F:2:2 (torque_ref_pct): '' is not"));
+    }
+}

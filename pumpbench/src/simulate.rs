@@ -1,0 +1,151 @@
+//! The `simulate` and `steady` commands for the white-box model.
+
+use crate::input::TorqueInput;
+use crate::Failure;
+use indicatif::{ProgressBar, ProgressStyle};
+use model_core::{Real, Scheme, Signals, WhiteBox};
+use std::fmt::Display;
+use std::io::Write;
+
+fn write_fail(e: std::io::Error) -> Failure {
+    Failure {
+        code: 1,
+        message: format!("cannot write the output: {e}"),
+    }
+}
+
+fn model_fail(e: model_core::BenchError) -> Failure {
+    Failure {
+        code: 1,
+        message: format!("model: {e}"),
+    }
+}
+
+/// Simulates `input` with the white-box bench in `T` arithmetic, RK4, steps ≤ `step_s`.
+pub fn whitebox<T: Real + Display, W: Write + ?Sized>(
+    input: &TorqueInput,
+    step_s: f64,
+    w: &mut W,
+) -> Result<(), Failure> {
+    let bench = WhiteBox::<T>::paper();
+    let n = input.t_s.len();
+    let mut state = bench
+        .steady_state(T::from_f64(input.torque_ref_pct[0]))
+        .map_err(model_fail)?;
+    // Shown only when stderr is a terminal and the run is long (many steps).
+    let total_s = input.t_s[n - 1] - input.t_s[0];
+    let bar = if total_s / step_s > 2e7 {
+        ProgressBar::new(n as u64)
+    } else {
+        ProgressBar::hidden()
+    };
+    bar.set_style(
+        ProgressStyle::with_template("simulate {bar:40} {pos}/{len} rows, eta {eta}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    writeln!(
+        w,
+        "t_s,torque_ref_pct,speed_rpm,flow_lps,pressure_mca,speed_rad_s,pump_head_mca,\
+         pipe_loss_mca,electromagnetic_torque_pct,load_torque_pct,extrapolated"
+    )
+    .map_err(write_fail)?;
+    for i in 0..n {
+        if i > 0 {
+            let u = T::from_f64(input.torque_ref_pct[i - 1]);
+            let dt = input.t_s[i] - input.t_s[i - 1];
+            bench
+                .advance(&mut state, u, dt, step_s, Scheme::Rk4)
+                .map_err(model_fail)?;
+        }
+        // Values in `T`'s shortest round-trip form: no digits the model did not compute.
+        let s: Signals<T> = bench.signals(&state);
+        writeln!(
+            w,
+            "{},{},{},{},{},{},{},{},{},{},{}",
+            input.t_s[i],
+            input.torque_ref_pct[i],
+            s.speed_rpm,
+            s.flow_lps,
+            s.pressure_mca,
+            s.speed_rad_s,
+            s.pump_head_mca,
+            s.pipe_loss_mca,
+            s.electromagnetic_torque_pct,
+            s.load_torque_pct,
+            u8::from(s.extrapolation.any()),
+        )
+        .map_err(write_fail)?;
+        if i % 1024 == 0 {
+            bar.set_position(i as u64);
+        }
+    }
+    bar.finish_and_clear();
+    Ok(())
+}
+
+/// Steady states of the white-box bench for each torque.
+pub fn steady<T: Real + Display, W: Write + ?Sized>(
+    torques: &[f64],
+    w: &mut W,
+) -> Result<(), Failure> {
+    let bench = WhiteBox::<T>::paper();
+    writeln!(w, "torque_ref_pct,speed_rpm,flow_lps,pressure_mca").map_err(write_fail)?;
+    for &u in torques {
+        let s = bench.signals(&bench.steady_state(T::from_f64(u)).map_err(model_fail)?);
+        writeln!(w, "{u},{},{},{}", s.speed_rpm, s.flow_lps, s.pressure_mca).map_err(write_fail)?;
+    }
+    Ok(())
+}
+
+/// Parses `5,10,15` or `start:stop:step` (stop included when hit within 1e-9 of a step).
+/// Every value must lie in 0..=100 %.
+pub fn parse_torque_list(s: &str) -> Result<Vec<f64>, String> {
+    let num = |x: &str| -> Result<f64, String> {
+        let x = x.trim();
+        match x.parse::<f64>() {
+            Ok(v) if v.is_finite() => Ok(v),
+            _ => Err(format!("--torque-pct: '{x}' is not a number")),
+        }
+    };
+    let values = if s.contains(':') {
+        let parts: Vec<&str> = s.split(':').collect();
+        if parts.len() != 3 {
+            return Err(format!("--torque-pct: '{s}' is not start:stop:step"));
+        }
+        let (a, b, step) = (num(parts[0])?, num(parts[1])?, num(parts[2])?);
+        if !(step > 0.0) || b < a {
+            return Err(format!("--torque-pct: '{s}' needs step > 0 and stop >= start"));
+        }
+        let n = ((b - a) / step + 1e-9).floor() as usize;
+        if n > 100_000 {
+            return Err(format!("--torque-pct: '{s}' gives more than 100000 points"));
+        }
+        (0..=n).map(|k| a + k as f64 * step).collect()
+    } else {
+        s.split(',').map(num).collect::<Result<Vec<_>, _>>()?
+    };
+    if values.is_empty() {
+        return Err("--torque-pct: no values".into());
+    }
+    if let Some(bad) = values.iter().find(|u| !(0.0..=100.0).contains(*u)) {
+        return Err(format!("--torque-pct: {bad} % is outside 0..100 %"));
+    }
+    Ok(values)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn torque_lists() {
+        assert_eq!(parse_torque_list("5,10,15").unwrap(), vec![5.0, 10.0, 15.0]);
+        assert_eq!(parse_torque_list("5:85:5").unwrap().len(), 17);
+        assert_eq!(parse_torque_list("5:85:5").unwrap()[16], 85.0);
+        assert_eq!(parse_torque_list("0:1:0.1").unwrap().len(), 11);
+        assert_eq!(parse_torque_list("50").unwrap(), vec![50.0]);
+        for bad in ["", "5,,10", "a", "5:85", "5:85:0", "85:5:5", "-5", "101", "5:200:5", "nan"] {
+            assert!(parse_torque_list(bad).is_err(), "{bad}");
+        }
+    }
+}
