@@ -64,7 +64,10 @@ fn assert_within(st: &[ErrorStats; 3], tol: f64, what: &str) {
         eprintln!("{what} {name}: {s}");
     }
     for (s, name) in st.iter().zip(names) {
-        assert!(s.max_abs <= tol, "{what}: {name} relative error {s} exceeds {tol:e}");
+        assert!(
+            s.max_abs <= tol,
+            "{what}: {name} relative error {s} exceeds {tol:e}"
+        );
     }
 }
 
@@ -98,7 +101,9 @@ fn cheaper_schemes_converge_with_their_order() {
         let e2 = compare(&model_run::<f64>(&input, scheme, 1e-3), &reference, 1e-4)[0].max_abs;
         let ratio = e1 / e2;
         let expected = 2f64.powf(order);
-        eprintln!("{scheme:?}: max speed error {e1:.3e} at 2 ms, {e2:.3e} at 1 ms, ratio {ratio:.2}");
+        eprintln!(
+            "{scheme:?}: max speed error {e1:.3e} at 2 ms, {e2:.3e} at 1 ms, ratio {ratio:.2}"
+        );
         assert!(
             (ratio / expected - 1.0).abs() < 0.3,
             "{scheme:?}: ratio {ratio}, expected ≈ {expected}"
@@ -127,10 +132,17 @@ fn steady_state_is_where_the_simulation_settles() {
     let bench = WhiteBox::<f64>::paper();
     for u in [0.0, 5.0, 45.0, 85.0, 100.0] {
         let mut state = BenchState::at_rest();
-        bench.advance(&mut state, u, 60.0, 1e-3, Scheme::Rk4).unwrap();
+        bench
+            .advance(&mut state, u, 60.0, 1e-3, Scheme::Rk4)
+            .unwrap();
         let steady = bench.steady_state(u).unwrap();
         let rel = (state.speed_rpm - steady.speed_rpm).abs() / steady.speed_rpm;
-        assert!(rel < 1e-9, "u={u}: settled {} vs steady {}", state.speed_rpm, steady.speed_rpm);
+        assert!(
+            rel < 1e-9,
+            "u={u}: settled {} vs steady {}",
+            state.speed_rpm,
+            steady.speed_rpm
+        );
     }
 }
 
@@ -154,15 +166,43 @@ fn bench_md_table_is_reproduced() {
     let bench = WhiteBox::<f64>::paper();
     let at = |u: f64| bench.signals(&bench.steady_state(u).unwrap());
     let close = |x: f64, printed: f64, half_ulp: f64, what: &str| {
-        assert!((x - printed).abs() <= half_ulp, "{what}: {x} vs BENCH.md {printed}");
+        assert!(
+            (x - printed).abs() <= half_ulp,
+            "{what}: {x} vs BENCH.md {printed}"
+        );
     };
     close(at(5.0).speed_rpm, 320.0, 5.0, "speed at 5 % (≈ 320 rpm)");
-    close(at(85.0).speed_rpm, 1629.0, 5.0, "speed at 85 % (≈ 1629 rpm)");
-    close(bench.flow_at(1749.0, 0.0), 21.9, 0.05, "flow at 1749 rpm (≈ 21.9 l/s)");
+    close(
+        at(85.0).speed_rpm,
+        1629.0,
+        5.0,
+        "speed at 85 % (≈ 1629 rpm)",
+    );
+    close(
+        bench.flow_at(1749.0, 0.0),
+        21.9,
+        0.05,
+        "flow at 1749 rpm (≈ 21.9 l/s)",
+    );
     close(at(85.0).flow_lps, 20.4, 0.05, "flow at 85 % (≈ 20.4 l/s)");
-    close(at(5.0).pressure_mca, 0.06, 0.005, "pressure at 5 % (≈ 0.06 mca)");
-    close(time_constant(&bench, 5.0, 15.0), 0.78, 0.015, "τ 5→15 % (≈ 0.78 s)");
-    close(time_constant(&bench, 75.0, 85.0), 0.22, 0.005, "τ 75→85 % (≈ 0.22 s)");
+    close(
+        at(5.0).pressure_mca,
+        0.06,
+        0.005,
+        "pressure at 5 % (≈ 0.06 mca)",
+    );
+    close(
+        time_constant(&bench, 5.0, 15.0),
+        0.78,
+        0.015,
+        "τ 5→15 % (≈ 0.78 s)",
+    );
+    close(
+        time_constant(&bench, 75.0, 85.0),
+        0.22,
+        0.005,
+        "τ 75→85 % (≈ 0.22 s)",
+    );
 }
 
 #[test]
@@ -190,7 +230,10 @@ fn edge_torques_and_big_steps() {
         let s = bench.signals(&bench.steady_state(u).unwrap());
         let (w, q, _) = reference.steady(u);
         assert!((s.speed_rpm / w - 1.0).abs() < 1e-6 && (s.flow_lps / q - 1.0).abs() < 1e-6);
-        assert!(s.extrapolation.any(), "0 and 100 % lie outside the fitted speed range");
+        assert!(
+            s.extrapolation.any(),
+            "0 and 100 % lie outside the fitted speed range"
+        );
     }
     // A step 5 → 85 → 5 % and 0 → 100 → 0 %, f64 and f32, against the reference.
     for (a, b) in [(5.0, 85.0), (0.0, 100.0)] {
@@ -203,8 +246,16 @@ fn edge_torques_and_big_steps() {
             })
             .collect();
         let r = reference.simulate(&fine);
-        assert_within(&compare(&model_run::<f64>(&fine, Scheme::Rk4, 1e-3), &r, 1e-4), 1e-6, "step f64");
-        assert_within(&compare(&model_run::<f32>(&fine, Scheme::Rk4, 1e-3), &r, 1e-3), 1e-4, "step f32");
+        assert_within(
+            &compare(&model_run::<f64>(&fine, Scheme::Rk4, 1e-3), &r, 1e-4),
+            1e-6,
+            "step f64",
+        );
+        assert_within(
+            &compare(&model_run::<f32>(&fine, Scheme::Rk4, 1e-3), &r, 1e-3),
+            1e-4,
+            "step f32",
+        );
     }
 }
 
@@ -229,7 +280,10 @@ fn zero_speed_and_the_no_flow_region() {
         let w = i as f64;
         let q = bench.flow_at(w, last);
         let q_ref = reference.flow(w);
-        assert!((q - q_ref).abs() <= 1e-9 * q_ref.max(1.0), "w={w}: {q} vs {q_ref}");
+        assert!(
+            (q - q_ref).abs() <= 1e-9 * q_ref.max(1.0),
+            "w={w}: {q} vs {q_ref}"
+        );
         assert!(q >= 0.0 && q.is_finite());
         if q > 0.0 && threshold.is_none() {
             threshold = Some(w);
@@ -242,7 +296,9 @@ fn zero_speed_and_the_no_flow_region() {
     // The bench still integrates through the region: start at rest, spin up, spin down.
     let mut state = BenchState::at_rest();
     for u in [0.0, 60.0, 0.0] {
-        bench.advance(&mut state, u, 10.0, 1e-3, Scheme::Rk4).unwrap();
+        bench
+            .advance(&mut state, u, 10.0, 1e-3, Scheme::Rk4)
+            .unwrap();
         let s = bench.signals(&state);
         assert!(s.speed_rpm.is_finite() && s.flow_lps >= 0.0);
     }
@@ -261,12 +317,18 @@ fn bad_input_is_refused_and_state_kept() {
         (100.01, BenchError::TorqueOutOfRange),
     ] {
         assert_eq!(bench.step(&mut state, u, 1e-3, Scheme::Rk4), Err(err));
-        assert_eq!(bench.advance(&mut state, u, 1.0, 1e-3, Scheme::Rk4), Err(err));
+        assert_eq!(
+            bench.advance(&mut state, u, 1.0, 1e-3, Scheme::Rk4),
+            Err(err)
+        );
         assert_eq!(bench.steady_state(u).map(|_| ()), Err(err));
         assert_eq!(state, before);
     }
     for dt in [0.0, -1e-3, f32::NAN, 0.2] {
-        assert_eq!(bench.step(&mut state, 50.0, dt, Scheme::Rk4), Err(BenchError::InvalidStep));
+        assert_eq!(
+            bench.step(&mut state, 50.0, dt, Scheme::Rk4),
+            Err(BenchError::InvalidStep)
+        );
         assert_eq!(state, before);
     }
     let mut b = bench;
@@ -293,20 +355,35 @@ mod props {
 
     fn check<T: Real>(holds: &[(f64, f64)], scheme: Scheme) -> Result<(), TestCaseError> {
         let bench = WhiteBox::<T>::paper();
-        let top = bench.steady_state(T::from_f64(100.0)).unwrap().speed_rpm.to_f64();
+        let top = bench
+            .steady_state(T::from_f64(100.0))
+            .unwrap()
+            .speed_rpm
+            .to_f64();
         let mut state = BenchState::at_rest();
         for &(u, d) in holds {
-            bench.advance(&mut state, T::from_f64(u), d, 1e-3, scheme).unwrap();
+            bench
+                .advance(&mut state, T::from_f64(u), d, 1e-3, scheme)
+                .unwrap();
             let s = bench.signals(&state);
-            let v = [s.speed_rpm, s.flow_lps, s.pressure_mca, s.pump_head_mca, s.load_torque_pct]
-                .map(|x| x.to_f64());
+            let v = [
+                s.speed_rpm,
+                s.flow_lps,
+                s.pressure_mca,
+                s.pump_head_mca,
+                s.load_torque_pct,
+            ]
+            .map(|x| x.to_f64());
             prop_assert!(v.iter().all(|x| x.is_finite()), "{v:?}");
             prop_assert!(v[0] >= 0.0 && v[0] <= top * (1.0 + 1e-4), "speed {}", v[0]);
             prop_assert!(v[1] >= 0.0 && v[1] < 27.8, "flow {}", v[1]);
             prop_assert!(v[2] >= -0.2521, "pressure {}", v[2]);
             if v[1] > 0.0 {
                 let balance = s.pump_head_mca.to_f64() - s.pipe_loss_mca.to_f64() - v[2];
-                prop_assert!(balance.abs() < 1e-3 * (1.0 + v[3].abs()), "head balance {balance}");
+                prop_assert!(
+                    balance.abs() < 1e-3 * (1.0 + v[3].abs()),
+                    "head balance {balance}"
+                );
             }
         }
         Ok(())

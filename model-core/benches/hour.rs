@@ -16,7 +16,13 @@ fn run<T: Real>(scheme: Scheme) -> (f64, f64) {
         let p = pulses.next_pulse();
         let hold = p.hold_s.min(remaining);
         bench
-            .advance(&mut state, T::from_f64(p.torque_ref_pct), hold, 1e-3, scheme)
+            .advance(
+                &mut state,
+                T::from_f64(p.torque_ref_pct),
+                hold,
+                1e-3,
+                scheme,
+            )
             .unwrap();
         remaining -= hold;
         last = black_box(state.speed_rpm).to_f64();

@@ -98,6 +98,50 @@ impl Iterator for PulseTrain {
     }
 }
 
+/// A [`PulseTrain`] on a grid of whole-millisecond steps: yields `(t_ms, torque_ref_pct)` for
+/// each step, the torque to hold from `t_ms` to `t_ms + step_ms`. Hold times are rounded to
+/// whole steps (at least one). The firmware's built-in excitation, and its host replay.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SteppedPulses {
+    train: PulseTrain,
+    step_ms: u32,
+    t_ms: u32,
+    next_change_ms: u32,
+    torque_ref_pct: f64,
+}
+
+impl SteppedPulses {
+    /// Steps of `step_ms` (≥ 1) ms through `train`.
+    pub fn new(mut train: PulseTrain, step_ms: u32) -> Self {
+        let step_ms = step_ms.max(1);
+        train.period_s = step_ms as f64 * 1e-3;
+        Self {
+            train,
+            step_ms,
+            t_ms: 0,
+            next_change_ms: 0,
+            torque_ref_pct: 0.0,
+        }
+    }
+}
+
+impl Iterator for SteppedPulses {
+    type Item = (u32, f64);
+    fn next(&mut self) -> Option<(u32, f64)> {
+        if self.t_ms == self.next_change_ms {
+            let p = self.train.next_pulse();
+            self.torque_ref_pct = p.torque_ref_pct;
+            let steps = libm::round(p.hold_s * 1e3 / self.step_ms as f64) as u32;
+            self.next_change_ms = self
+                .next_change_ms
+                .checked_add(steps.max(1) * self.step_ms)?;
+        }
+        let t = self.t_ms;
+        self.t_ms = self.t_ms.checked_add(self.step_ms)?;
+        Some((t, self.torque_ref_pct))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -118,6 +162,22 @@ mod tests {
         assert!((mean - 45.0).abs() < 8.0, "mean {mean}");
         // SplitMix64's published first output for seed 0.
         assert_eq!(SplitMix64::new(0).next_u64(), 0xE220_A839_7B1D_CDAF);
+    }
+
+    #[test]
+    fn stepped_pulses_follow_the_train() {
+        let mut train = PulseTrain::paper(5);
+        train.period_s = 0.002;
+        let mut stepped = SteppedPulses::new(PulseTrain::paper(5), 2);
+        let mut t = 0u32;
+        for _ in 0..20 {
+            let p = train.next_pulse();
+            let steps = libm::round(p.hold_s / 0.002) as u32;
+            for _ in 0..steps {
+                assert_eq!(stepped.next(), Some((t, p.torque_ref_pct)));
+                t += 2;
+            }
+        }
     }
 
     #[test]

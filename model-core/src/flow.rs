@@ -50,7 +50,7 @@ pub fn balance_cubic<T: Real>(
 ) -> CubicInFlow<T> {
     let mut g = CubicInFlow::from_poly(alpha, speed_rpm);
     g.c2 = g.c2 - system_k_mca_per_lps2;
-    g.c0 = g.c0 + static_head_c_mca;
+    g.c0 += static_head_c_mca;
     g
 }
 
@@ -183,7 +183,10 @@ mod tests {
         let g = from_roots(1e-3, [2.0, 5.0, 9.0]);
         for w in WARM {
             let s = solve_flow(&g, w);
-            assert!((s.flow_lps - 9.0).abs() < 1e-12 && s.converged, "warm {w}: {s:?}");
+            assert!(
+                (s.flow_lps - 9.0).abs() < 1e-12 && s.converged,
+                "warm {w}: {s:?}"
+            );
         }
     }
 
@@ -261,8 +264,14 @@ mod tests {
             let w = 50.0 * i as f64;
             let g64 = balance_cubic(&p64.alpha, 0.025 + 0.1082 * 0.1082, 0.252, w);
             let g32 = balance_cubic(&p32.alpha, 0.025 + 0.1082f32 * 0.1082, 0.252, w as f32);
-            let (a, b) = (solve_flow(&g64, 0.0).flow_lps, solve_flow(&g32, 0.0).flow_lps);
-            assert!((a - b as f64).abs() <= 2e-6 * a.max(1.0), "w={w}: {a} vs {b}");
+            let (a, b) = (
+                solve_flow(&g64, 0.0).flow_lps,
+                solve_flow(&g32, 0.0).flow_lps,
+            );
+            assert!(
+                (a - b as f64).abs() <= 2e-6 * a.max(1.0),
+                "w={w}: {a} vs {b}"
+            );
         }
     }
 }

@@ -22,16 +22,8 @@ pub const RPM_PER_RAD_S: f64 = 30.0 / core::f64::consts::PI;
 pub const PAPER_GAMMA: [f64; 6] = [-1.506e-8, 3.843e-6, -3.319e-4, 1.263e-2, 0.707, 2.244];
 /// Eq. (5), α1..α10 of the pump head `F_H(ω, Q)` in mca (ω in rpm, Q in l/s).
 pub const PAPER_ALPHA: [f64; 10] = [
-    -1.3631e-3,
-    1.3620e-9,
-    1.7304e-5,
-    -7.3548e-8,
-    -2.5497e-2,
-    5.7314e-6,
-    1.0691e-4,
-    -9.6703e-2,
-    4.4057e-3,
-    -2.5259e-1,
+    -1.3631e-3, 1.3620e-9, 1.7304e-5, -7.3548e-8, -2.5497e-2, 5.7314e-6, 1.0691e-4, -9.6703e-2,
+    4.4057e-3, -2.5259e-1,
 ];
 /// Eq. (6), β1..β10 of the load torque `F_T(ω, Q)` in % of nominal torque (ω in rpm, Q in l/s).
 /// It already holds the viscous (b·ω) and Coulomb (Tc) friction.

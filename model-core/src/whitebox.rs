@@ -349,7 +349,7 @@ impl<T: Real> WhiteBox<T> {
         let mut found = false;
         while hi < limit {
             lo = hi;
-            hi = hi + step;
+            hi += step;
             let (s, q_hi) = self.surplus(te, hi, q);
             q = q_hi;
             if !s.is_finite() {
@@ -400,7 +400,9 @@ impl<T: Real> WhiteBox<T> {
     ) -> Result<BenchState<T>, BenchError> {
         Self::check_torque(torque_ref_pct)?;
         if !speed_rpm.is_finite() || speed_rpm < T::ZERO {
-            return Err(BenchError::InvalidParameter("speed must be finite and >= 0"));
+            return Err(BenchError::InvalidParameter(
+                "speed must be finite and >= 0",
+            ));
         }
         let q = self.flow_at(speed_rpm, T::ZERO);
         Ok(self.state_with(speed_rpm, q, torque_ref_pct))
@@ -433,8 +435,14 @@ mod tests {
         assert_eq!(b.advance(&mut s, 30.0, 0.05, 1e-3, Scheme::Rk4), Ok(50));
         assert_eq!(b.advance(&mut s, 30.0, 0.0015, 1e-3, Scheme::Rk4), Ok(2));
         assert_eq!(b.advance(&mut s, 30.0, 0.0, 1e-3, Scheme::Rk4), Ok(0));
-        assert_eq!(b.advance(&mut s, 30.0, 1.0, 0.3, Scheme::Rk4), Err(BenchError::InvalidStep));
-        assert_eq!(b.advance(&mut s, 30.0, -1.0, 1e-3, Scheme::Rk4), Err(BenchError::InvalidStep));
+        assert_eq!(
+            b.advance(&mut s, 30.0, 1.0, 0.3, Scheme::Rk4),
+            Err(BenchError::InvalidStep)
+        );
+        assert_eq!(
+            b.advance(&mut s, 30.0, -1.0, 1e-3, Scheme::Rk4),
+            Err(BenchError::InvalidStep)
+        );
     }
 
     #[test]

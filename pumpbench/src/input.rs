@@ -52,8 +52,8 @@ pub fn read_columns(path: &Path, names: &[&str]) -> Result<NumericColumns, Input
         column,
         message,
     };
-    let file = std::fs::File::open(path)
-        .map_err(|e| err(None, None, format!("cannot open: {e}")))?;
+    let file =
+        std::fs::File::open(path).map_err(|e| err(None, None, format!("cannot open: {e}")))?;
     let mut reader = csv::ReaderBuilder::new()
         .has_headers(true)
         .trim(csv::Trim::All)
@@ -210,8 +210,14 @@ mod tests {
 
     #[test]
     fn bad_files_name_line_and_column() {
-        assert_eq!(error_of(""), "F:1: empty file: expected a header row with t_s,torque_ref_pct");
-        assert_eq!(error_of("t_s,torque_ref_pct\n"), "F:2: no data rows after the header");
+        assert_eq!(
+            error_of(""),
+            "F:1: empty file: expected a header row with t_s,torque_ref_pct"
+        );
+        assert_eq!(
+            error_of("t_s,torque_ref_pct\n"),
+            "F:2: no data rows after the header"
+        );
         assert_eq!(
             error_of("t_s,torque\n0,1\n"),
             "F:1: missing column 'torque_ref_pct' (header is 't_s,torque')"

@@ -3,6 +3,9 @@
 //! Exit codes: 0 success; 2 bad command line or bad input file (one-line error on stderr,
 //! no output file left behind); 1 any other failure (e.g. the output cannot be written).
 
+// `!(x > 0.0)` is deliberate: unlike `x <= 0.0` it is also true for NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 mod input;
 mod output;
 mod simulate;
@@ -89,7 +92,10 @@ fn parse_step_ms(s: &str) -> Result<f64, String> {
     if v.is_finite() && v > 0.0 && v <= model_core::MAX_STEP_S * 1e3 {
         Ok(v)
     } else {
-        Err(format!("step must be > 0 and <= {} ms", model_core::MAX_STEP_S * 1e3))
+        Err(format!(
+            "step must be > 0 and <= {} ms",
+            model_core::MAX_STEP_S * 1e3
+        ))
     }
 }
 

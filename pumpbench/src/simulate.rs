@@ -114,7 +114,9 @@ pub fn parse_torque_list(s: &str) -> Result<Vec<f64>, String> {
         }
         let (a, b, step) = (num(parts[0])?, num(parts[1])?, num(parts[2])?);
         if !(step > 0.0) || b < a {
-            return Err(format!("--torque-pct: '{s}' needs step > 0 and stop >= start"));
+            return Err(format!(
+                "--torque-pct: '{s}' needs step > 0 and stop >= start"
+            ));
         }
         let n = ((b - a) / step + 1e-9).floor() as usize;
         if n > 100_000 {
@@ -144,7 +146,9 @@ mod tests {
         assert_eq!(parse_torque_list("5:85:5").unwrap()[16], 85.0);
         assert_eq!(parse_torque_list("0:1:0.1").unwrap().len(), 11);
         assert_eq!(parse_torque_list("50").unwrap(), vec![50.0]);
-        for bad in ["", "5,,10", "a", "5:85", "5:85:0", "85:5:5", "-5", "101", "5:200:5", "nan"] {
+        for bad in [
+            "", "5,,10", "a", "5:85", "5:85:0", "85:5:5", "-5", "101", "5:200:5", "nan",
+        ] {
             assert!(parse_torque_list(bad).is_err(), "{bad}");
         }
     }

@@ -56,10 +56,31 @@ fn simulate_matches_reference_in_f64_and_f32() {
     let path = write(dir.path(), "u.csv", &to_csv(&input));
     let reference = Reference::paper().simulate(&input);
     for (precision, tol, floor) in [("f64", 1e-6, 1e-4), ("f32", 1e-4, 1e-3)] {
-        let out = pumpbench(&["simulate", "--model", "whitebox", "--precision", precision, "--input", &path]);
-        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        let out = pumpbench(&[
+            "simulate",
+            "--model",
+            "whitebox",
+            "--precision",
+            precision,
+            "--input",
+            &path,
+        ]);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
         let (header, rows) = parse_csv(&String::from_utf8(out.stdout).unwrap());
-        assert_eq!(header[..5], ["t_s", "torque_ref_pct", "speed_rpm", "flow_lps", "pressure_mca"]);
+        assert_eq!(
+            header[..5],
+            [
+                "t_s",
+                "torque_ref_pct",
+                "speed_rpm",
+                "flow_lps",
+                "pressure_mca"
+            ]
+        );
         assert_eq!(rows.len(), input.len());
         let mut st = [ErrorStats::default(); 3];
         for (row, r) in rows.iter().zip(&reference) {
@@ -78,15 +99,31 @@ fn simulate_matches_reference_in_f64_and_f32() {
 #[test]
 fn first_row_is_the_steady_state_and_step_size_is_honoured() {
     let dir = tempfile::tempdir().unwrap();
-    let path = write(dir.path(), "u.csv", "t_s,torque_ref_pct\n0,50\n0.25,80\n0.5,80\n");
+    let path = write(
+        dir.path(),
+        "u.csv",
+        "t_s,torque_ref_pct\n0,50\n0.25,80\n0.5,80\n",
+    );
     let steady = pumpbench(&["steady", "--model", "whitebox", "--torque-pct", "50"]);
     let (_, s) = parse_csv(&String::from_utf8(steady.stdout).unwrap());
     let run = |step: &str| {
-        let out = pumpbench(&["simulate", "--model", "whitebox", "--step-ms", step, "--input", &path]);
+        let out = pumpbench(&[
+            "simulate",
+            "--model",
+            "whitebox",
+            "--step-ms",
+            step,
+            "--input",
+            &path,
+        ]);
         parse_csv(&String::from_utf8(out.stdout).unwrap()).1
     };
     let fine = run("1");
-    assert_eq!(fine[0][2..5], s[0][1..4], "row 0 = steady state of its torque");
+    assert_eq!(
+        fine[0][2..5],
+        s[0][1..4],
+        "row 0 = steady state of its torque"
+    );
     // Second row: the 50 % torque held 0.25 s from steady state changes nothing.
     assert!((fine[1][2] / fine[0][2] - 1.0).abs() < 1e-12);
     // Third row: RK4 at 100 ms vs 1 ms differ, but little (4th order).
@@ -100,7 +137,10 @@ fn steady_list_and_range() {
     let out = pumpbench(&["steady", "--model", "whitebox", "--torque-pct", "5:85:5"]);
     assert!(out.status.success());
     let (header, rows) = parse_csv(&String::from_utf8(out.stdout).unwrap());
-    assert_eq!(header, ["torque_ref_pct", "speed_rpm", "flow_lps", "pressure_mca"]);
+    assert_eq!(
+        header,
+        ["torque_ref_pct", "speed_rpm", "flow_lps", "pressure_mca"]
+    );
     assert_eq!(rows.len(), 17);
     let reference = Reference::paper();
     for row in &rows {
@@ -108,9 +148,24 @@ fn steady_list_and_range() {
         assert!((row[1] / w - 1.0).abs() < 1e-6 && (row[2] / q - 1.0).abs() < 1e-6);
         assert!((row[3] - hs).abs() / hs.abs().max(1e-4) < 1e-6);
     }
-    assert!(rows.windows(2).all(|p| p[1][1] > p[0][1] && p[1][2] > p[0][2]), "monotone");
-    let out = pumpbench(&["steady", "--model", "whitebox", "--precision", "f32", "--torque-pct", "5,10,15"]);
-    assert_eq!(parse_csv(&String::from_utf8(out.stdout).unwrap()).1.len(), 3);
+    assert!(
+        rows.windows(2)
+            .all(|p| p[1][1] > p[0][1] && p[1][2] > p[0][2]),
+        "monotone"
+    );
+    let out = pumpbench(&[
+        "steady",
+        "--model",
+        "whitebox",
+        "--precision",
+        "f32",
+        "--torque-pct",
+        "5,10,15",
+    ]);
+    assert_eq!(
+        parse_csv(&String::from_utf8(out.stdout).unwrap()).1.len(),
+        3
+    );
 }
 
 #[test]
@@ -118,34 +173,78 @@ fn bad_files_fail_with_one_line_exit_2_and_no_output() {
     let dir = tempfile::tempdir().unwrap();
     let cases = [
         ("empty.csv", "", ":1: empty file"),
-        ("nocol.csv", "t_s,u\n0,1\n", ":1: missing column 'torque_ref_pct'"),
-        ("text.csv", "t_s,torque_ref_pct\n0,1\n1,x\n", ":3:2 (torque_ref_pct): 'x' is not a number"),
-        ("back.csv", "t_s,torque_ref_pct\n0,1\n2,1\n1,1\n", ":4:1 (t_s): time 1 s is not after"),
-        ("range.csv", "t_s,torque_ref_pct\n0,150\n", ":2:2 (torque_ref_pct): torque reference 150"),
+        (
+            "nocol.csv",
+            "t_s,u\n0,1\n",
+            ":1: missing column 'torque_ref_pct'",
+        ),
+        (
+            "text.csv",
+            "t_s,torque_ref_pct\n0,1\n1,x\n",
+            ":3:2 (torque_ref_pct): 'x' is not a number",
+        ),
+        (
+            "back.csv",
+            "t_s,torque_ref_pct\n0,1\n2,1\n1,1\n",
+            ":4:1 (t_s): time 1 s is not after",
+        ),
+        (
+            "range.csv",
+            "t_s,torque_ref_pct\n0,150\n",
+            ":2:2 (torque_ref_pct): torque reference 150",
+        ),
     ];
     for (name, text, expected) in cases {
         let input = write(dir.path(), name, text);
         let output = dir.path().join(format!("{name}.out"));
         let out = pumpbench(&[
-            "simulate", "--model", "whitebox", "--input", &input, "--output", output.to_str().unwrap(),
+            "simulate",
+            "--model",
+            "whitebox",
+            "--input",
+            &input,
+            "--output",
+            output.to_str().unwrap(),
         ]);
         let stderr = String::from_utf8(out.stderr).unwrap();
         assert_eq!(out.status.code(), Some(2), "{name}: {stderr}");
         assert_eq!(stderr.lines().count(), 1, "{name}: one line: {stderr}");
-        assert!(stderr.contains(&format!("{input}{expected}")), "{name}: {stderr}");
+        assert!(
+            stderr.contains(&format!("{input}{expected}")),
+            "{name}: {stderr}"
+        );
         assert!(!output.exists(), "{name}: no output file");
         assert!(out.stdout.is_empty());
     }
     // Leftover temporary files: none in the output directory.
-    let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
+    let left: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
     assert_eq!(left.len(), cases.len(), "{left:?}");
-    let missing = pumpbench(&["simulate", "--model", "whitebox", "--input", "/nonexistent.csv"]);
+    let missing = pumpbench(&[
+        "simulate",
+        "--model",
+        "whitebox",
+        "--input",
+        "/nonexistent.csv",
+    ]);
     assert_eq!(missing.status.code(), Some(2));
-    assert!(String::from_utf8(missing.stderr).unwrap().contains("/nonexistent.csv: cannot open"));
+    assert!(String::from_utf8(missing.stderr)
+        .unwrap()
+        .contains("/nonexistent.csv: cannot open"));
     for args in [
         &["steady", "--model", "whitebox", "--torque-pct", "5:x:5"][..],
         &["steady", "--model", "whitebox", "--torque-pct", "120"][..],
-        &["simulate", "--model", "whitebox", "--step-ms", "0", "--input", "x"][..],
+        &[
+            "simulate",
+            "--model",
+            "whitebox",
+            "--step-ms",
+            "0",
+            "--input",
+            "x",
+        ][..],
         &["simulate", "--model", "blackbox", "--input", "x"][..],
     ] {
         assert_eq!(pumpbench(args).status.code(), Some(2), "{args:?}");
@@ -157,7 +256,15 @@ fn output_file_written_whole() {
     let dir = tempfile::tempdir().unwrap();
     let input = write(dir.path(), "u.csv", &to_csv(&irregular_input()));
     let output = dir.path().join("sub_out.csv");
-    let out = pumpbench(&["simulate", "--model", "whitebox", "--input", &input, "--output", output.to_str().unwrap()]);
+    let out = pumpbench(&[
+        "simulate",
+        "--model",
+        "whitebox",
+        "--input",
+        &input,
+        "--output",
+        output.to_str().unwrap(),
+    ]);
     assert!(out.status.success() && out.stdout.is_empty());
     let text = std::fs::read_to_string(&output).unwrap();
     assert_eq!(text.lines().count(), 121);
