@@ -113,27 +113,23 @@ impl<T: Real> WhiteBox<T> {
     /// Validates `params` and builds the model.
     pub fn new(params: BenchParams<T>) -> Result<Self, BenchError> {
         params.validate()?;
+        Ok(Self::from_valid(params))
+    }
+
+    /// The paper's bench (its parameters pass validation: tested in `paper_parameters_validate`).
+    pub fn paper() -> Self {
+        Self::from_valid(BenchParams::paper())
+    }
+
+    fn from_valid(params: BenchParams<T>) -> Self {
         let accel = T::from_f64(
             params.nominal_torque_nm.to_f64() / 100.0 / params.inertia_kg_m2.to_f64()
                 * RPM_PER_RAD_S,
         );
-        Ok(Self {
+        Self {
             system_k: params.pipe_k1 + params.valve_k2 * params.valve_k2,
             accel,
             params,
-        })
-    }
-
-    /// The paper's bench.
-    pub fn paper() -> Self {
-        match Self::new(BenchParams::paper()) {
-            Ok(m) => m,
-            // The paper's values pass validation (tested); this arm is unreachable.
-            Err(_) => Self {
-                params: BenchParams::paper(),
-                system_k: T::ZERO,
-                accel: T::ZERO,
-            },
         }
     }
 
@@ -205,6 +201,9 @@ impl<T: Real> WhiteBox<T> {
     /// Advances `state` by one step of `dt_s` seconds (finite, 0 < dt ≤ [`MAX_STEP_S`]) with the
     /// torque reference `torque_ref_pct` (0..=100 %) held over the step.
     ///
+    /// The new speed and flow are in `state`; every other signal comes from
+    /// [`Self::signals`], computed only when asked for (it costs two polynomial evaluations,
+    /// which a loop that samples every 50 ms need not pay every 1 ms step).
     /// On error the state is unchanged.
     pub fn step(
         &self,
