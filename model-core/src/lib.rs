@@ -52,6 +52,7 @@ pub mod equations;
 pub mod error;
 pub mod excitation;
 pub mod flow;
+pub mod narmax;
 pub mod params;
 pub mod scalar;
 pub mod whitebox;

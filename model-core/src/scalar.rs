@@ -1,6 +1,6 @@
 //! One code path for `f32` (the MCU) and `f64` (the host) through a small scalar trait.
 //!
-//! Only `sqrt` and `abs` need a maths library; both come from `libm` (pure Rust, no_std, the
+//! Only `sqrt`, `abs` and `tanh` need a maths library; all come from `libm` (pure Rust, no_std, the
 //! same routines on the host and the target, correctly rounded `sqrt`). `micromath` was not
 //! chosen: its `sqrt` is an approximation (~5 % error bound documented), far outside the
 //! 1e-4 budget of the f32 model. `sqrt` is not on the hot path: the flow solver only needs
@@ -42,6 +42,8 @@ pub trait Real:
     fn max(self, other: Self) -> Self;
     /// The smaller of two values (the non-NaN one if one is NaN).
     fn min(self, other: Self) -> Self;
+    /// Hyperbolic tangent (`libm`).
+    fn tanh(self) -> Self;
 }
 
 impl Real for f32 {
@@ -76,6 +78,10 @@ impl Real for f32 {
     fn min(self, other: Self) -> Self {
         f32::min(self, other)
     }
+    #[inline]
+    fn tanh(self) -> Self {
+        libm::tanhf(self)
+    }
 }
 
 impl Real for f64 {
@@ -109,5 +115,9 @@ impl Real for f64 {
     #[inline]
     fn min(self, other: Self) -> Self {
         f64::min(self, other)
+    }
+    #[inline]
+    fn tanh(self) -> Self {
+        libm::tanh(self)
     }
 }

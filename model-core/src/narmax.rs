@@ -1,0 +1,514 @@
+//! Neural NARMAX forward pass (paper section 3.1; Nørgaard's NNSYSID `nnarmax2` layout).
+//!
+//! A one-hidden-layer tanh network with a linear output predicts `y(t)` from the regressors
+//!
+//! ```text
+//! φ(t) = [y(t−1) … y(t−na), u(t−nk) … u(t−nk−nb+1), ε(t−1) … ε(t−nc)]
+//! ŷ(t) = W2 · [tanh(W1 · [φ(t); 1]); 1]
+//! ```
+//!
+//! all in scaled units (`(x − mean) / std` for u and y, ε = y − ŷ scaled by y's std). `W1` is
+//! hidden × (inputs + 1) with the bias last, `W2` is 1 × (hidden + 1) with the bias last, as
+//! NNSYSID stores them.
+//!
+//! Shapes: `N` (regressors) and `H` (hidden units) are const generics that bound the model:
+//! the firmware instantiates them exactly (`Narmax<f32, 12, 7>` for the paper's pressure
+//! model), the host generously; the model's own lags are checked against them when it is
+//! built. History is kept in fixed-size shift registers: no allocation.
+//!
+//! Two ways to run it: **free-run simulation** ([`Narmax::simulate_step`]: past model outputs
+//! fed back, error inputs zero), and **one-step-ahead prediction** ([`Narmax::predict_step`]:
+//! measured past outputs, and past prediction errors when nc > 0). Regressors outside the
+//! training range are clamped to it and the result is flagged.
+
+use crate::scalar::Real;
+
+/// Largest input delay `nk` supported.
+pub const MAX_NK: usize = 8;
+
+/// Lag structure of a NARMAX model.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Lags {
+    /// Past outputs y(t−1..t−na).
+    pub na: usize,
+    /// Past inputs u(t−nk..t−nk−nb+1).
+    pub nb: usize,
+    /// Past prediction errors ε(t−1..t−nc) (0 for NARX).
+    pub nc: usize,
+    /// Input delay, samples (0..=[`MAX_NK`]; 1 in the paper).
+    pub nk: usize,
+}
+
+impl Lags {
+    /// Number of regressors, na + nb + nc.
+    pub fn inputs(&self) -> usize {
+        self.na + self.nb + self.nc
+    }
+
+    /// Samples of history a prediction needs: max(na, nk + nb − 1, nc).
+    pub fn max_lag(&self) -> usize {
+        self.na
+            .max(self.nc)
+            .max((self.nk + self.nb).saturating_sub(1))
+    }
+}
+
+/// Affine scaling `scaled = (x − mean) / std` (NNSYSID `dscale`: zero mean, unit variance).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Scaling<T> {
+    /// Mean, physical units.
+    pub mean: T,
+    /// Standard deviation, physical units, > 0.
+    pub std: T,
+}
+
+impl<T: Real> Scaling<T> {
+    /// Physical to scaled.
+    #[inline]
+    pub fn scale(&self, x: T) -> T {
+        (x - self.mean) / self.std
+    }
+    /// Scaled to physical.
+    #[inline]
+    pub fn unscale(&self, z: T) -> T {
+        z * self.std + self.mean
+    }
+}
+
+/// Why a NARMAX model was refused when built.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum NarmaxError {
+    /// More regressors or hidden units than this build's capacity (`N`, `H`).
+    TooLarge,
+    /// `W1` or `W2` has the wrong number of values for the lags and hidden width.
+    WrongShape,
+    /// A weight, scaling or range value is NaN or infinite, a std is ≤ 0, or a range is empty.
+    BadValue,
+    /// nk > [`MAX_NK`], or no regressor and no hidden unit.
+    BadLags,
+}
+
+impl core::fmt::Display for NarmaxError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(match self {
+            NarmaxError::TooLarge => "more regressors or hidden units than this build supports",
+            NarmaxError::WrongShape => {
+                "weight matrix shapes do not match the lags and hidden width"
+            }
+            NarmaxError::BadValue => "non-finite weight or scaling, std <= 0, or empty range",
+            NarmaxError::BadLags => "lags out of range (nk <= 8, at least one regressor)",
+        })
+    }
+}
+
+impl core::error::Error for NarmaxError {}
+
+/// A NARMAX model: weights, scaling and training ranges (immutable configuration).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Narmax<T, const N: usize, const H: usize> {
+    lags: Lags,
+    hidden: usize,
+    w1: [[T; N]; H],
+    b1: [T; H],
+    w2: [T; H],
+    b2: T,
+    u_scale: Scaling<T>,
+    y_scale: Scaling<T>,
+    /// Training range of u, scaled units.
+    u_range: [T; 2],
+    /// Training range of y, scaled units.
+    y_range: [T; 2],
+}
+
+/// The history of a running model (small, `Copy`, owned by the caller).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NarmaxState<T, const N: usize> {
+    /// y(t−1), y(t−2), … scaled.
+    y: [T; N],
+    /// u(t−nk), u(t−nk−1), … scaled.
+    u: [T; N],
+    /// ε(t−1), ε(t−2), … scaled.
+    e: [T; N],
+    /// u(t), u(t−1), … u(t−nk+1) scaled, waiting for their delay.
+    delay: [T; MAX_NK],
+}
+
+/// One model output.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NarmaxOutput<T> {
+    /// Predicted output, physical units.
+    pub y: T,
+    /// A regressor was outside the training range and was clamped.
+    pub clamped: bool,
+}
+
+fn shift_in<T: Copy>(reg: &mut [T], x: T) {
+    if reg.is_empty() {
+        return;
+    }
+    reg.copy_within(0..reg.len() - 1, 1);
+    reg[0] = x;
+}
+
+impl<T: Real, const N: usize, const H: usize> Narmax<T, N, H> {
+    /// Builds a model from NNSYSID-layout weights.
+    ///
+    /// - `w1`: hidden × (na + nb + nc + 1), row-major, bias last in each row;
+    /// - `w2`: hidden + 1, bias last;
+    /// - `u_range`, `y_range`: training ranges in physical units (regressors are clamped to
+    ///   them), `[min, max]` with min < max.
+    ///
+    /// Every value must be finite and both stds > 0.
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        lags: Lags,
+        hidden: usize,
+        w1: &[T],
+        w2: &[T],
+        u_scale: Scaling<T>,
+        y_scale: Scaling<T>,
+        u_range: [T; 2],
+        y_range: [T; 2],
+    ) -> Result<Self, NarmaxError> {
+        let n = lags.inputs();
+        if lags.nk > MAX_NK || n == 0 || hidden == 0 {
+            return Err(NarmaxError::BadLags);
+        }
+        if n > N || hidden > H || lags.na > N || lags.nb > N || lags.nc > N {
+            return Err(NarmaxError::TooLarge);
+        }
+        if w1.len() != hidden * (n + 1) || w2.len() != hidden + 1 {
+            return Err(NarmaxError::WrongShape);
+        }
+        let finite = w1
+            .iter()
+            .chain(w2)
+            .chain(&[u_scale.mean, u_scale.std, y_scale.mean, y_scale.std])
+            .chain(&u_range)
+            .chain(&y_range)
+            .all(|x| x.is_finite());
+        if !finite
+            || !(u_scale.std > T::ZERO)
+            || !(y_scale.std > T::ZERO)
+            || !(u_range[0] < u_range[1])
+            || !(y_range[0] < y_range[1])
+        {
+            return Err(NarmaxError::BadValue);
+        }
+        let mut m = Self {
+            lags,
+            hidden,
+            w1: [[T::ZERO; N]; H],
+            b1: [T::ZERO; H],
+            w2: [T::ZERO; H],
+            b2: w2[hidden],
+            u_scale,
+            y_scale,
+            u_range: [u_scale.scale(u_range[0]), u_scale.scale(u_range[1])],
+            y_range: [y_scale.scale(y_range[0]), y_scale.scale(y_range[1])],
+        };
+        for j in 0..hidden {
+            let row = &w1[j * (n + 1)..(j + 1) * (n + 1)];
+            m.w1[j][..n].copy_from_slice(&row[..n]);
+            m.b1[j] = row[n];
+            m.w2[j] = w2[j];
+        }
+        Ok(m)
+    }
+
+    /// The lags.
+    pub fn lags(&self) -> Lags {
+        self.lags
+    }
+
+    /// Hidden units.
+    pub fn hidden(&self) -> usize {
+        self.hidden
+    }
+
+    /// Scaling of u and y.
+    pub fn scaling(&self) -> (Scaling<T>, Scaling<T>) {
+        (self.u_scale, self.y_scale)
+    }
+
+    /// Network output (scaled) for a regressor vector φ (scaled, `lags().inputs()` long).
+    #[inline]
+    pub fn network(&self, phi: &[T]) -> T {
+        let n = self.lags.inputs().min(phi.len());
+        let mut out = self.b2;
+        for j in 0..self.hidden {
+            let mut acc = self.b1[j];
+            for (w, x) in self.w1[j][..n].iter().zip(&phi[..n]) {
+                acc += *w * *x;
+            }
+            out += self.w2[j] * acc.tanh();
+        }
+        out
+    }
+
+    /// A state with every past value at the scaled point of `u`, `y` (physical), no errors.
+    pub fn state_at(&self, u: T, y: T) -> NarmaxState<T, N> {
+        let (zu, zy) = (self.u_scale.scale(u), self.y_scale.scale(y));
+        NarmaxState {
+            y: [zy; N],
+            u: [zu; N],
+            e: [T::ZERO; N],
+            delay: [zu; MAX_NK],
+        }
+    }
+
+    /// Puts one measured sample `(u(t), y(t))` into the history without predicting: to seed
+    /// the first `lags().max_lag()` samples of a run from data.
+    pub fn seed(&self, st: &mut NarmaxState<T, N>, u: T, y: T) {
+        self.push_u(st, u);
+        shift_in(&mut st.y[..self.lags.na], self.y_scale.scale(y));
+        shift_in(&mut st.e[..self.lags.nc], T::ZERO);
+    }
+
+    fn push_u(&self, st: &mut NarmaxState<T, N>, u: T) {
+        let z = self.u_scale.scale(u);
+        let nk = self.lags.nk;
+        let delayed = if nk == 0 {
+            z
+        } else {
+            let out = st.delay[nk - 1];
+            shift_in(&mut st.delay[..nk], z);
+            out
+        };
+        shift_in(&mut st.u[..self.lags.nb], delayed);
+    }
+
+    /// Regressors for the current sample (clamped), and whether any was clamped.
+    fn regressors(&self, st: &NarmaxState<T, N>, phi: &mut [T; N]) -> bool {
+        let Lags { na, nb, nc, .. } = self.lags;
+        let mut clamped = false;
+        let mut clamp = |x: T, r: &[T; 2]| {
+            if x < r[0] {
+                clamped = true;
+                r[0]
+            } else if x > r[1] {
+                clamped = true;
+                r[1]
+            } else {
+                x
+            }
+        };
+        for i in 0..na {
+            phi[i] = clamp(st.y[i], &self.y_range);
+        }
+        for i in 0..nb {
+            phi[na + i] = clamp(st.u[i], &self.u_range);
+        }
+        phi[na + nb..na + nb + nc].copy_from_slice(&st.e[..nc]);
+        clamped
+    }
+
+    /// Free-run simulation: takes u(t) (physical), returns ŷ(t) and feeds it back as the next
+    /// y(t−1); error regressors are zero.
+    pub fn simulate_step(&self, st: &mut NarmaxState<T, N>, u: T) -> NarmaxOutput<T> {
+        self.push_u(st, u);
+        let mut phi = [T::ZERO; N];
+        let clamped = self.regressors(st, &mut phi);
+        let z = self.network(&phi);
+        shift_in(&mut st.y[..self.lags.na], z);
+        shift_in(&mut st.e[..self.lags.nc], T::ZERO);
+        NarmaxOutput {
+            y: self.y_scale.unscale(z),
+            clamped,
+        }
+    }
+
+    /// One-step-ahead prediction: takes u(t) and the measurement y(t) (physical), returns
+    /// ŷ(t) predicted from the past only, then stores y(t) and ε(t) = y(t) − ŷ(t).
+    pub fn predict_step(&self, st: &mut NarmaxState<T, N>, u: T, y_measured: T) -> NarmaxOutput<T> {
+        self.push_u(st, u);
+        let mut phi = [T::ZERO; N];
+        let clamped = self.regressors(st, &mut phi);
+        let z = self.network(&phi);
+        let zy = self.y_scale.scale(y_measured);
+        shift_in(&mut st.y[..self.lags.na], zy);
+        shift_in(&mut st.e[..self.lags.nc], zy - z);
+        NarmaxOutput {
+            y: self.y_scale.unscale(z),
+            clamped,
+        }
+    }
+
+    /// The free-run output settled under a constant input `u`: runs the model from the
+    /// output mean until two successive outputs differ by less than `tol` (physical units) for
+    /// `max_lag` steps in a row, at most `max_steps` steps. `None` if it does not settle
+    /// (oscillating or diverging model).
+    pub fn steady_output(&self, u: T, tol: T, max_steps: usize) -> Option<T> {
+        let mut st = self.state_at(u, self.y_scale.mean);
+        let mut last = self.y_scale.mean;
+        let mut calm = 0;
+        let need = self.lags.max_lag().max(1);
+        for _ in 0..max_steps {
+            let y = self.simulate_step(&mut st, u).y;
+            if !y.is_finite() {
+                return None;
+            }
+            if (y - last).abs() < tol {
+                calm += 1;
+                if calm >= need {
+                    return Some(y);
+                }
+            } else {
+                calm = 0;
+            }
+            last = y;
+        }
+        None
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const UNIT: Scaling<f64> = Scaling {
+        mean: 0.0,
+        std: 1.0,
+    };
+    const WIDE: [f64; 2] = [-1e6, 1e6];
+
+    /// A model whose hidden unit j sees regressor j only, with a small gain (tanh ≈ linear
+    /// is not needed: we invert it), so the output reveals the regressor vector.
+    fn probe(lags: Lags, pick: usize) -> Narmax<f64, 16, 4> {
+        let n = lags.inputs();
+        let mut w1 = vec![0.0; n + 1];
+        w1[pick] = 1e-3;
+        Narmax::new(lags, 1, &w1, &[1.0, 0.0], UNIT, UNIT, WIDE, WIDE).unwrap()
+    }
+
+    fn seen(_m: &Narmax<f64, 16, 4>, y: f64) -> f64 {
+        libm::atanh(y) / 1e-3
+    }
+
+    #[test]
+    fn regressors_follow_nnsysid_order_and_delay() {
+        let lags = Lags {
+            na: 2,
+            nb: 3,
+            nc: 1,
+            nk: 2,
+        };
+        assert_eq!(lags.max_lag(), 4);
+        // Input regressor i (0-based within u) at time t must be u(t − nk − i).
+        for i in 0..3 {
+            let m = probe(lags, 2 + i);
+            let mut st = m.state_at(0.0, 0.0);
+            let mut out = 0.0;
+            for t in 0..10 {
+                out = seen(&m, m.predict_step(&mut st, t as f64, 0.0).y);
+            }
+            assert!((out - (9 - 2 - i) as f64).abs() < 1e-6, "u lag {i}: {out}");
+        }
+        // Output regressor i at time t is y(t − 1 − i); error regressor is ε(t − 1).
+        let m = probe(lags, 1);
+        let mut st = m.state_at(0.0, 0.0);
+        for t in 0..6 {
+            m.predict_step(&mut st, 0.0, 100.0 + t as f64);
+        }
+        let y = seen(&m, m.predict_step(&mut st, 0.0, 0.0).y);
+        assert!((y - 104.0).abs() < 1e-6, "y(t-2) = {y}");
+        let m = probe(lags, 5);
+        let mut st = m.state_at(0.0, 0.0);
+        let first = m.predict_step(&mut st, 0.0, 7.0).y; // ε(t) = 7 − ŷ
+        let e = seen(&m, m.predict_step(&mut st, 0.0, 0.0).y);
+        assert!((e - (7.0 - first)).abs() < 1e-6, "ε(t-1) = {e}");
+    }
+
+    #[test]
+    fn nk_zero_uses_the_current_input() {
+        let m = probe(
+            Lags {
+                na: 0,
+                nb: 1,
+                nc: 0,
+                nk: 0,
+            },
+            0,
+        );
+        let mut st = m.state_at(0.0, 0.0);
+        assert!((seen(&m, m.simulate_step(&mut st, 3.0).y) - 3.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn free_run_feeds_back_and_clamps() {
+        // y(t) = 0.5 tanh(y(t−1)·1) + u-free bias: settles at the fixed point.
+        let lags = Lags {
+            na: 1,
+            nb: 1,
+            nc: 0,
+            nk: 1,
+        };
+        let m: Narmax<f64, 4, 2> = Narmax::new(
+            lags,
+            1,
+            &[1.0, 0.0, 0.0],
+            &[0.5, 0.2],
+            UNIT,
+            UNIT,
+            [-1.0, 1.0],
+            [-1.0, 1.0],
+        )
+        .unwrap();
+        let y = m.steady_output(0.0, 1e-12, 1000).unwrap();
+        assert!((y - (0.5 * libm::tanh(y) + 0.2)).abs() < 1e-10);
+        let mut st = m.state_at(5.0, 0.0);
+        assert!(
+            m.simulate_step(&mut st, 5.0).clamped,
+            "u = 5 outside [-1, 1]"
+        );
+    }
+
+    #[test]
+    fn bad_models_are_refused_when_built() {
+        let lags = Lags {
+            na: 2,
+            nb: 2,
+            nc: 0,
+            nk: 1,
+        };
+        let w1 = [0.1; 2 * 5];
+        let w2 = [0.1; 3];
+        let ok = |w1: &[f64], w2: &[f64], s: Scaling<f64>, r: [f64; 2]| {
+            Narmax::<f64, 4, 2>::new(lags, 2, w1, w2, s, UNIT, r, WIDE).map(|_| ())
+        };
+        assert_eq!(ok(&w1, &w2, UNIT, WIDE), Ok(()));
+        assert_eq!(ok(&w1[..9], &w2, UNIT, WIDE), Err(NarmaxError::WrongShape));
+        assert_eq!(ok(&w1, &w2[..2], UNIT, WIDE), Err(NarmaxError::WrongShape));
+        let mut nan = w1;
+        nan[3] = f64::NAN;
+        assert_eq!(ok(&nan, &w2, UNIT, WIDE), Err(NarmaxError::BadValue));
+        assert_eq!(
+            ok(
+                &w1,
+                &w2,
+                Scaling {
+                    mean: 0.0,
+                    std: 0.0
+                },
+                WIDE
+            ),
+            Err(NarmaxError::BadValue)
+        );
+        assert_eq!(ok(&w1, &w2, UNIT, [1.0, 1.0]), Err(NarmaxError::BadValue));
+        let big = Lags {
+            na: 3,
+            nb: 2,
+            nc: 0,
+            nk: 1,
+        };
+        assert_eq!(
+            Narmax::<f64, 4, 2>::new(big, 2, &[0.0; 12], &w2, UNIT, UNIT, WIDE, WIDE).map(|_| ()),
+            Err(NarmaxError::TooLarge)
+        );
+        let far = Lags { nk: 9, ..lags };
+        assert_eq!(
+            Narmax::<f64, 4, 2>::new(far, 2, &w1, &w2, UNIT, UNIT, WIDE, WIDE).map(|_| ()),
+            Err(NarmaxError::BadLags)
+        );
+    }
+}
