@@ -293,11 +293,11 @@ impl<T: Real, const N: usize, const H: usize> Narmax<T, N, H> {
                 x
             }
         };
-        for i in 0..na {
-            phi[i] = clamp(st.y[i], &self.y_range);
+        for (p, &y) in phi[..na].iter_mut().zip(&st.y[..na]) {
+            *p = clamp(y, &self.y_range);
         }
-        for i in 0..nb {
-            phi[na + i] = clamp(st.u[i], &self.u_range);
+        for (p, &u) in phi[na..na + nb].iter_mut().zip(&st.u[..nb]) {
+            *p = clamp(u, &self.u_range);
         }
         phi[na + nb..na + nb + nc].copy_from_slice(&st.e[..nc]);
         clamped

@@ -249,3 +249,54 @@ mod tests {
         assert!(error_of("t_s,torque_ref_pct\n0,").contains("F:2:2 (torque_ref_pct): '' is not"));
     }
 }
+
+/// A uniformly sampled record: times, torque and optionally one output column.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Series {
+    /// Times, s, strictly increasing.
+    pub t_s: Vec<f64>,
+    /// Torque references, %.
+    pub torque_ref_pct: Vec<f64>,
+    /// The output column, if the file has it.
+    pub y: Option<Vec<f64>>,
+    /// Sample period read from `t_s` (mean spacing), s.
+    pub sample_period_s: f64,
+}
+
+/// Reads `t_s,torque_ref_pct` and, if present (or required), the column `y_column`; checks
+/// that times are strictly increasing and uniformly spaced (within 0.1 % of the mean step).
+pub fn read_series(path: &Path, y_column: &str, required: bool) -> Result<Series, InputError> {
+    let input = read_torque_input(path)?;
+    let with_y = match read_columns(path, &["t_s", y_column]) {
+        Ok(d) => Some(d),
+        Err(e) if !required && e.message.starts_with("missing column") => None,
+        Err(e) => return Err(e),
+    };
+    let y = with_y
+        .as_ref()
+        .map(|d| d.rows.iter().map(|r| r[1]).collect());
+    let n = input.t_s.len();
+    let ts = if n > 1 {
+        (input.t_s[n - 1] - input.t_s[0]) / (n - 1) as f64
+    } else {
+        0.0
+    };
+    let lines = read_columns(path, &["t_s"])?.lines;
+    for (pair, &line) in input.t_s.windows(2).zip(&lines[1..]) {
+        let d = pair[1] - pair[0];
+        if (d - ts).abs() > 1e-3 * ts {
+            return Err(InputError {
+                path: path.to_path_buf(),
+                line: Some(line),
+                column: None,
+                message: format!("not uniformly sampled: step {d} s where the mean step is {ts} s"),
+            });
+        }
+    }
+    Ok(Series {
+        t_s: input.t_s,
+        torque_ref_pct: input.torque_ref_pct,
+        y,
+        sample_period_s: ts,
+    })
+}

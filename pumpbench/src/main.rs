@@ -6,9 +6,14 @@
 // `!(x > 0.0)` is deliberate: unlike `x <= 0.0` it is also true for NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+mod benchdata;
+mod excite;
 mod input;
+mod modelfile;
+mod narmaxcmd;
 mod output;
 mod simulate;
+mod train;
 
 use clap::{Parser, Subcommand, ValueEnum};
 use std::path::PathBuf;
@@ -27,6 +32,8 @@ struct Cli {
 enum Model {
     /// The paper's white-box bench (eqs. 3-8).
     Whitebox,
+    /// A neural NARMAX model from `identify` (needs --weights).
+    Narmax,
 }
 
 /// Arithmetic of the model.
@@ -36,6 +43,8 @@ enum Precision {
     F64,
     /// Single precision, as on the MCU.
     F32,
+    /// Fixed point (Q15-class), as on the MCU (NARMAX only; not implemented yet).
+    Q15,
 }
 
 #[derive(Subcommand)]
@@ -54,6 +63,9 @@ enum Command {
         /// Arithmetic.
         #[arg(long, value_enum, default_value = "f64")]
         precision: Precision,
+        /// NARMAX model file (with --model narmax).
+        #[arg(long)]
+        weights: Option<PathBuf>,
         /// Largest internal RK4 step, ms (0 < step <= 100). Each interval between input
         /// rows is split into equal steps no longer than this, so every input time is hit.
         #[arg(long, default_value_t = 1.0, value_parser = parse_step_ms)]
@@ -77,6 +89,9 @@ enum Command {
         /// Arithmetic.
         #[arg(long, value_enum, default_value = "f64")]
         precision: Precision,
+        /// NARMAX model file (with --model narmax).
+        #[arg(long)]
+        weights: Option<PathBuf>,
         /// Torque references, % (0..100): a list `5,10,15` or a range `5:85:5`
         /// (start:stop:step, stop included).
         #[arg(long, allow_hyphen_values = true)]
@@ -85,6 +100,111 @@ enum Command {
         #[arg(long)]
         output: Option<PathBuf>,
     },
+    /// The paper's excitation: pulses of uncorrelated amplitudes, uniform in a range, held
+    /// for random whole numbers of samples. CSV `t_s,torque_ref_pct`, one row per sample;
+    /// the input's normalised auto-covariance at lags 1..10 goes to stderr.
+    Excite {
+        /// Seed of the generator (same seed, same signal, on every machine).
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Length, s.
+        #[arg(long, value_parser = parse_positive)]
+        seconds: f64,
+        /// Sample period, ms.
+        #[arg(long, default_value_t = 50.0, value_parser = parse_positive)]
+        ts_ms: f64,
+        /// Lowest amplitude, % (0..100).
+        #[arg(long, default_value_t = 5.0)]
+        min_pct: f64,
+        /// Highest amplitude, % (0..100).
+        #[arg(long, default_value_t = 85.0)]
+        max_pct: f64,
+        /// Shortest hold, s (rounded to whole samples, at least one).
+        #[arg(long, default_value_t = 0.1, value_parser = parse_positive)]
+        min_hold_s: f64,
+        /// Longest hold, s.
+        #[arg(long, default_value_t = 2.0, value_parser = parse_positive)]
+        max_hold_s: f64,
+        /// Output CSV (stdout if omitted).
+        #[arg(long)]
+        output: Option<PathBuf>,
+    },
+    /// Identify a neural NARX/NARMAX model (NNSYSID nnarx/nnarmax2 semantics, LM) from a
+    /// uniformly sampled record; writes a model file (JSON).
+    Identify {
+        /// Training data: header with t_s, torque_ref_pct and the target's column.
+        #[arg(long)]
+        data: PathBuf,
+        /// Output to model.
+        #[arg(long, value_enum)]
+        target: modelfile::Target,
+        /// Output lags y(t-1..t-na).
+        #[arg(long)]
+        na: usize,
+        /// Input lags u(t-nk..t-nk-nb+1).
+        #[arg(long)]
+        nb: usize,
+        /// Error lags e(t-1..t-nc) (0: NARX).
+        #[arg(long, default_value_t = 0)]
+        nc: usize,
+        /// Input delay, samples.
+        #[arg(long, default_value_t = 1)]
+        nk: usize,
+        /// Hidden tanh units.
+        #[arg(long)]
+        hidden: usize,
+        /// Accepted Levenberg-Marquardt steps.
+        #[arg(long, default_value_t = 40)]
+        epochs: usize,
+        /// Seed of the initial weights.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Starts probed: this many seeded weight sets (seed, seed+1, …) are each trained
+        /// for 5 LM epochs and the one with the lowest training criterion continues to
+        /// --epochs (its 5 count among them). 1 = NNSYSID's single random start.
+        #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u64).range(1..=64))]
+        starts: u64,
+        /// Model file to write.
+        #[arg(long)]
+        output: PathBuf,
+    },
+    /// Free-run MAPE_d of a NARMAX model on a record (seed rows skipped, paper eq. 1) and,
+    /// with --static, MAPE_s on steady-state points (eq. 2).
+    Validate {
+        /// Model file.
+        #[arg(long)]
+        weights: PathBuf,
+        /// Validation record: t_s, torque_ref_pct and the target's column.
+        #[arg(long)]
+        data: PathBuf,
+        /// Steady-state points: torque_ref_pct and the target's column.
+        #[arg(long = "static")]
+        statics: Option<PathBuf>,
+        /// Arithmetic.
+        #[arg(long, value_enum, default_value = "f64")]
+        precision: Precision,
+    },
+    /// A SYNTHETIC bench record for a torque input: the white-box bench plus transmitter lags,
+    /// noise and 12-bit quantisation. Demo data, not a measurement. CSV
+    /// `t_s,torque_ref_pct,speed_rpm,flow_lps,pressure_mca`, one row per input row.
+    BenchData {
+        /// Input CSV `t_s,torque_ref_pct` (as for `simulate`).
+        #[arg(long)]
+        input: PathBuf,
+        /// Seed of the noise.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Output CSV (stdout if omitted).
+        #[arg(long)]
+        output: Option<PathBuf>,
+    },
+}
+
+fn parse_positive(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
+        _ => Err(format!("'{s}' is not a positive number")),
+    }
 }
 
 fn parse_step_ms(s: &str) -> Result<f64, String> {
@@ -122,20 +242,166 @@ impl Failure {
     }
 }
 
+fn need_weights(w: Option<PathBuf>) -> Result<modelfile::ModelFile, Failure> {
+    let path =
+        w.ok_or_else(|| Failure::usage("--model narmax needs --weights MODEL.json".into()))?;
+    modelfile::ModelFile::read(&path)
+}
+
+fn no_q15() -> Failure {
+    Failure::usage("--precision q15 is not implemented yet (f64 and f32 are)".into())
+}
+
 fn run(cli: Cli) -> Result<(), Failure> {
     match cli.command {
+        Command::Identify {
+            data,
+            target,
+            na,
+            nb,
+            nc,
+            nk,
+            hidden,
+            epochs,
+            seed,
+            starts,
+            output,
+        } => {
+            let o = narmaxcmd::Identify {
+                starts: starts as usize,
+                data: &data,
+                target,
+                structure: train::Structure {
+                    na,
+                    nb,
+                    nc,
+                    nk,
+                    hidden,
+                },
+                epochs,
+                seed,
+            };
+            let model = narmaxcmd::run_identify(&o)?;
+            output::write_csv(Some(&output), |w| {
+                serde_json::to_writer_pretty(&mut *w, &model).map_err(|e| Failure {
+                    code: 1,
+                    message: format!("cannot write the model: {e}"),
+                })?;
+                writeln!(w).map_err(|e| Failure {
+                    code: 1,
+                    message: e.to_string(),
+                })
+            })
+        }
+        Command::Validate {
+            weights,
+            data,
+            statics,
+            precision,
+        } => {
+            let m = modelfile::ModelFile::read(&weights)?;
+            let series = narmaxcmd::read_for_model(&m, &data, true)?;
+            let points = match &statics {
+                None => None,
+                Some(p) => {
+                    let cols = input::read_columns(p, &["torque_ref_pct", m.target.column()])?;
+                    Some(cols.rows.iter().map(|r| (r[0], r[1])).collect::<Vec<_>>())
+                }
+            };
+            let v = match precision {
+                Precision::F64 => narmaxcmd::validate::<f64>(&m, &series, points.as_deref())?,
+                Precision::F32 => narmaxcmd::validate::<f32>(&m, &series, points.as_deref())?,
+                Precision::Q15 => return Err(no_q15()),
+            };
+            println!("target={}", m.target.column());
+            println!(
+                "mape_d_pct={:.4} (free run, {} samples after the seed rows)",
+                v.mape_d_pct, v.samples
+            );
+            if let Some((n, s)) = v.mape_s {
+                println!("mape_s_pct={s:.4} ({n} steady-state points)");
+            }
+            Ok(())
+        }
+        Command::Excite {
+            seed,
+            seconds,
+            ts_ms,
+            min_pct,
+            max_pct,
+            min_hold_s,
+            max_hold_s,
+            output,
+        } => {
+            if !(0.0..=100.0).contains(&min_pct)
+                || !(0.0..=100.0).contains(&max_pct)
+                || min_pct > max_pct
+            {
+                return Err(Failure::usage(format!(
+                    "--min-pct {min_pct} and --max-pct {max_pct} must satisfy 0 <= min <= max <= 100"
+                )));
+            }
+            if min_hold_s > max_hold_s {
+                return Err(Failure::usage(
+                    "--min-hold-s must be <= --max-hold-s".into(),
+                ));
+            }
+            if seconds / (ts_ms * 1e-3) > 1e8 {
+                return Err(Failure::usage(
+                    "more than 1e8 samples: shorten --seconds".into(),
+                ));
+            }
+            let o = excite::Excite {
+                seed,
+                seconds,
+                ts_s: ts_ms * 1e-3,
+                min_pct,
+                max_pct,
+                min_hold_s,
+                max_hold_s,
+            };
+            output::write_csv(output.as_deref(), |w| excite::run(&o, w))
+        }
+        Command::BenchData {
+            input,
+            seed,
+            output,
+        } => {
+            let data = input::read_torque_input(&input)?;
+            output::write_csv(output.as_deref(), |w| benchdata::run(&data, seed, w))
+        }
         Command::Simulate {
             model: Model::Whitebox,
             precision,
             step_ms,
             input,
             output,
+            ..
         } => {
             let data = input::read_torque_input(&input)?;
             let step_s = step_ms * 1e-3;
             output::write_csv(output.as_deref(), |w| match precision {
                 Precision::F64 => simulate::whitebox::<f64, _>(&data, step_s, w),
                 Precision::F32 => simulate::whitebox::<f32, _>(&data, step_s, w),
+                Precision::Q15 => Err(Failure::usage(
+                    "--precision q15 is for NARMAX models".into(),
+                )),
+            })
+        }
+        Command::Simulate {
+            model: Model::Narmax,
+            precision,
+            weights,
+            input,
+            output,
+            ..
+        } => {
+            let m = need_weights(weights)?;
+            let series = narmaxcmd::read_for_model(&m, &input, false)?;
+            output::write_csv(output.as_deref(), |w| match precision {
+                Precision::F64 => narmaxcmd::simulate::<f64>(&m, &series, w),
+                Precision::F32 => narmaxcmd::simulate::<f32>(&m, &series, w),
+                Precision::Q15 => Err(no_q15()),
             })
         }
         Command::Steady {
@@ -143,11 +409,30 @@ fn run(cli: Cli) -> Result<(), Failure> {
             precision,
             torque_pct,
             output,
+            ..
         } => {
             let torques = simulate::parse_torque_list(&torque_pct).map_err(Failure::usage)?;
             output::write_csv(output.as_deref(), |w| match precision {
                 Precision::F64 => simulate::steady::<f64, _>(&torques, w),
                 Precision::F32 => simulate::steady::<f32, _>(&torques, w),
+                Precision::Q15 => Err(Failure::usage(
+                    "--precision q15 is for NARMAX models".into(),
+                )),
+            })
+        }
+        Command::Steady {
+            model: Model::Narmax,
+            precision,
+            weights,
+            torque_pct,
+            output,
+        } => {
+            let m = need_weights(weights)?;
+            let torques = simulate::parse_torque_list(&torque_pct).map_err(Failure::usage)?;
+            output::write_csv(output.as_deref(), |w| match precision {
+                Precision::F64 => narmaxcmd::steady::<f64>(&m, &torques, w),
+                Precision::F32 => narmaxcmd::steady::<f32>(&m, &torques, w),
+                Precision::Q15 => Err(no_q15()),
             })
         }
     }

@@ -1,0 +1,199 @@
+//! The NARMAX model file (JSON): weights in NNSYSID layout, scaling, lags, sample period,
+//! target, and training metadata. Checked when read: a bad file is refused before any run.
+
+use crate::Failure;
+use model_core::narmax::{Lags, Narmax, Scaling};
+use model_core::Real;
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// Format tag written in every model file.
+pub const FORMAT: &str = "pumpbench-narmax-1";
+
+/// Capacity of the host's NARMAX models: regressors.
+pub const HOST_MAX_INPUTS: usize = 64;
+/// Capacity of the host's NARMAX models: hidden units.
+pub const HOST_MAX_HIDDEN: usize = 32;
+/// A NARMAX model as the host runs it (model-core, generous capacity).
+pub type HostNarmax<T> = Narmax<T, HOST_MAX_INPUTS, HOST_MAX_HIDDEN>;
+
+/// What the model predicts.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum Target {
+    /// Outlet pressure, mca (column `pressure_mca`).
+    Pressure,
+    /// Flow, l/s (column `flow_lps`).
+    Flow,
+}
+
+impl Target {
+    /// The CSV column of this target.
+    pub fn column(self) -> &'static str {
+        match self {
+            Target::Pressure => "pressure_mca",
+            Target::Flow => "flow_lps",
+        }
+    }
+}
+
+/// Mean and standard deviation (N − 1), physical units.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ScalingFile {
+    /// Mean.
+    pub mean: f64,
+    /// Standard deviation.
+    pub std: f64,
+}
+
+/// Lags as stored.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct LagsFile {
+    /// Output lags.
+    pub na: usize,
+    /// Input lags.
+    pub nb: usize,
+    /// Error lags.
+    pub nc: usize,
+    /// Input delay.
+    pub nk: usize,
+}
+
+/// How the model was trained.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Training {
+    /// Training data file, as given.
+    pub data: String,
+    /// Samples in it.
+    pub samples: usize,
+    /// Accepted LM epochs asked for.
+    pub epochs: usize,
+    /// Accepted LM epochs done.
+    pub epochs_done: usize,
+    /// Seed of the initial weights.
+    pub seed: u64,
+    /// Seeded starts probed; the best (training criterion) was kept.
+    pub starts: usize,
+    /// Criterion SSE/(2N), scaled units, before training and after each epoch.
+    pub criterion: Vec<f64>,
+    /// Final λ.
+    pub lambda: f64,
+    /// Why training stopped.
+    pub stop: String,
+    /// Wall time, s.
+    pub seconds: f64,
+    /// pumpbench version.
+    pub tool: String,
+}
+
+/// A model file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ModelFile {
+    /// [`FORMAT`].
+    pub format: String,
+    /// Predicted output.
+    pub target: Target,
+    /// Sample period, s.
+    pub sample_period_s: f64,
+    /// Lags.
+    pub lags: LagsFile,
+    /// Hidden tanh units.
+    pub hidden: usize,
+    /// Hidden layer, hidden rows of (na + nb + nc + 1), bias last (NNSYSID W1).
+    pub w1: Vec<Vec<f64>>,
+    /// Output layer, hidden + 1, bias last (NNSYSID W2).
+    pub w2: Vec<f64>,
+    /// Input scaling.
+    pub u_scaling: ScalingFile,
+    /// Output scaling.
+    pub y_scaling: ScalingFile,
+    /// Training range of the torque reference, %.
+    pub u_range: [f64; 2],
+    /// Training range of the output.
+    pub y_range: [f64; 2],
+    /// Training metadata.
+    pub training: Training,
+}
+
+fn bad(path: &Path, message: String) -> Failure {
+    Failure {
+        code: 2,
+        message: format!("{}: {message}", path.display()),
+    }
+}
+
+impl ModelFile {
+    /// Lags for model-core.
+    pub fn lags(&self) -> Lags {
+        Lags {
+            na: self.lags.na,
+            nb: self.lags.nb,
+            nc: self.lags.nc,
+            nk: self.lags.nk,
+        }
+    }
+
+    /// Reads and checks a model file.
+    pub fn read(path: &Path) -> Result<Self, Failure> {
+        let text =
+            std::fs::read_to_string(path).map_err(|e| bad(path, format!("cannot read: {e}")))?;
+        let m: ModelFile = serde_json::from_str(&text).map_err(|e| {
+            bad(
+                path,
+                format!(
+                    "not a pumpbench model file (line {}, column {}): {e}",
+                    e.line(),
+                    e.column()
+                ),
+            )
+        })?;
+        if m.format != FORMAT {
+            return Err(bad(
+                path,
+                format!("format '{}', expected '{FORMAT}'", m.format),
+            ));
+        }
+        let n = m.lags().inputs();
+        if m.w1.len() != m.hidden
+            || m.w1.iter().any(|r| r.len() != n + 1)
+            || m.w2.len() != m.hidden + 1
+        {
+            return Err(bad(
+                path,
+                format!(
+                    "weights do not match the lags and hidden width: expected w1 {}×{} and w2 {}",
+                    m.hidden,
+                    n + 1,
+                    m.hidden + 1
+                ),
+            ));
+        }
+        if !(m.sample_period_s.is_finite() && m.sample_period_s > 0.0) {
+            return Err(bad(path, "sample_period_s must be > 0".into()));
+        }
+        m.build::<f64>().map_err(|e| bad(path, e))?;
+        Ok(m)
+    }
+
+    /// The model-core model in `T` arithmetic.
+    pub fn build<T: Real>(&self) -> Result<HostNarmax<T>, String> {
+        let c = |x: f64| T::from_f64(x);
+        let w1: Vec<T> = self.w1.iter().flatten().map(|&x| c(x)).collect();
+        let w2: Vec<T> = self.w2.iter().map(|&x| c(x)).collect();
+        let sc = |s: ScalingFile| Scaling {
+            mean: c(s.mean),
+            std: c(s.std),
+        };
+        Narmax::new(
+            self.lags(),
+            self.hidden,
+            &w1,
+            &w2,
+            sc(self.u_scaling),
+            sc(self.y_scaling),
+            [c(self.u_range[0]), c(self.u_range[1])],
+            [c(self.y_range[0]), c(self.y_range[1])],
+        )
+        .map_err(|e| e.to_string())
+    }
+}

@@ -1,0 +1,303 @@
+//! NARMAX commands: `identify`, and the narmax forms of `simulate`, `steady`, `validate`.
+
+use crate::input::{read_series, Series};
+use crate::modelfile::{HostNarmax, LagsFile, ModelFile, ScalingFile, Target, Training, FORMAT};
+use crate::train::{identify, Data, Structure};
+use crate::Failure;
+use indicatif::{ProgressBar, ProgressStyle};
+use model_core::Real;
+use std::fmt::Display;
+use std::io::Write;
+use std::path::Path;
+
+fn usage(m: String) -> Failure {
+    Failure {
+        code: 2,
+        message: m,
+    }
+}
+
+fn io(e: std::io::Error) -> Failure {
+    Failure {
+        code: 1,
+        message: format!("cannot write the output: {e}"),
+    }
+}
+
+/// Mean and standard deviation (N − 1, as MATLAB's `std`).
+pub fn mean_std(x: &[f64]) -> (f64, f64) {
+    let n = x.len() as f64;
+    let mean = x.iter().sum::<f64>() / n;
+    let var = x.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0).max(1.0);
+    (mean, var.sqrt())
+}
+
+fn range(x: &[f64]) -> [f64; 2] {
+    x.iter().fold([f64::INFINITY, f64::NEG_INFINITY], |r, &v| {
+        [r[0].min(v), r[1].max(v)]
+    })
+}
+
+/// Options of `identify`.
+pub struct Identify<'a> {
+    /// Training data.
+    pub data: &'a Path,
+    /// Output to model.
+    pub target: Target,
+    /// Structure.
+    pub structure: Structure,
+    /// Accepted LM steps.
+    pub epochs: usize,
+    /// Seed of the initial weights.
+    pub seed: u64,
+    /// Seeded starts probed (the best training criterion continues).
+    pub starts: usize,
+}
+
+/// Trains a model; returns the model file.
+pub fn run_identify(o: &Identify) -> Result<ModelFile, Failure> {
+    let s = o.structure;
+    if s.hidden == 0 || s.inputs() == 0 || s.nk > model_core::narmax::MAX_NK {
+        return Err(usage(
+            "need --hidden >= 1, at least one lag, and --nk <= 8".into(),
+        ));
+    }
+    if s.inputs() > crate::modelfile::HOST_MAX_INPUTS
+        || s.hidden > crate::modelfile::HOST_MAX_HIDDEN
+    {
+        return Err(usage(format!(
+            "at most {} regressors and {} hidden units",
+            crate::modelfile::HOST_MAX_INPUTS,
+            crate::modelfile::HOST_MAX_HIDDEN
+        )));
+    }
+    let series = read_series(o.data, o.target.column(), true)?;
+    let y = series.y.clone().unwrap_or_default();
+    let n = y.len();
+    if n < s.max_lag() + s.params() + 1 {
+        return Err(usage(format!(
+            "{}: {n} samples is too few for {} weights after {} lags",
+            o.data.display(),
+            s.params(),
+            s.max_lag()
+        )));
+    }
+    let (um, us) = mean_std(&series.torque_ref_pct);
+    let (ym, ys) = mean_std(&y);
+    if !(us > 0.0) || !(ys > 0.0) {
+        return Err(usage(format!(
+            "{}: torque or {} is constant: nothing to identify",
+            o.data.display(),
+            o.target.column()
+        )));
+    }
+    let u_scaled: Vec<f64> = series
+        .torque_ref_pct
+        .iter()
+        .map(|u| (u - um) / us)
+        .collect();
+    let y_scaled: Vec<f64> = y.iter().map(|v| (v - ym) / ys).collect();
+    let bar = ProgressBar::new(o.epochs as u64);
+    bar.set_style(
+        ProgressStyle::with_template("identify {bar:30} epoch {pos}/{len} {msg} [{elapsed}]")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let start = std::time::Instant::now();
+    let d = Data {
+        u: &u_scaled,
+        y: &y_scaled,
+    };
+    let trained = identify(&s, &d, o.epochs, o.seed, o.starts, |e| {
+        bar.set_position(e.epoch as u64);
+        bar.set_message(format!(
+            "criterion {:.4e} lambda {:.1e}",
+            e.criterion, e.lambda
+        ));
+    });
+    bar.finish_and_clear();
+    let seconds = start.elapsed().as_secs_f64();
+    let n_in = s.inputs();
+    let file = ModelFile {
+        format: FORMAT.into(),
+        target: o.target,
+        sample_period_s: series.sample_period_s,
+        lags: LagsFile {
+            na: s.na,
+            nb: s.nb,
+            nc: s.nc,
+            nk: s.nk,
+        },
+        hidden: s.hidden,
+        w1: trained
+            .weights
+            .w1
+            .chunks(n_in + 1)
+            .map(|r| r.to_vec())
+            .collect(),
+        w2: trained.weights.w2.clone(),
+        u_scaling: ScalingFile { mean: um, std: us },
+        y_scaling: ScalingFile { mean: ym, std: ys },
+        u_range: range(&series.torque_ref_pct),
+        y_range: range(&y),
+        training: Training {
+            data: o.data.display().to_string(),
+            samples: n,
+            epochs: o.epochs,
+            epochs_done: trained.criterion.len() - 1,
+            seed: o.seed,
+            starts: o.starts,
+            criterion: trained.criterion.clone(),
+            lambda: trained.lambda,
+            stop: trained.stop.into(),
+            seconds,
+            tool: format!("pumpbench {}", env!("CARGO_PKG_VERSION")),
+        },
+    };
+    eprintln!(
+        "identify: {} epochs in {seconds:.2} s, criterion {:.4e} -> {:.4e} ({})",
+        file.training.epochs_done,
+        trained.criterion[0],
+        trained.criterion.last().copied().unwrap_or(f64::NAN),
+        trained.stop
+    );
+    Ok(file)
+}
+
+/// Reads a data file for a model and checks its sample period against the model's.
+pub fn read_for_model(m: &ModelFile, path: &Path, need_y: bool) -> Result<Series, Failure> {
+    let s = read_series(path, m.target.column(), need_y)?;
+    if s.t_s.len() > 1 && (s.sample_period_s / m.sample_period_s - 1.0).abs() > 1e-3 {
+        return Err(usage(format!(
+            "{}: sampled every {} s but the model was identified at {} s",
+            path.display(),
+            s.sample_period_s,
+            m.sample_period_s
+        )));
+    }
+    Ok(s)
+}
+
+/// Free-run simulation of `series` with the model in `T`: returns one output per row. If the
+/// series has the target column, its first max-lag rows seed the history and are returned as
+/// measured; otherwise the history starts at the model's own steady state for the first torque.
+pub fn free_run<T: Real>(m: &HostNarmax<T>, series: &Series) -> Result<Vec<T>, Failure> {
+    let c = T::from_f64;
+    let u = &series.torque_ref_pct;
+    let mut out = Vec::with_capacity(u.len());
+    let mut st;
+    let mut start = 0;
+    match &series.y {
+        Some(y) => {
+            st = m.state_at(c(u[0]), m.scaling().1.mean);
+            start = m.lags().max_lag().min(u.len());
+            for k in 0..start {
+                m.seed(&mut st, c(u[k]), c(y[k]));
+                out.push(c(y[k]));
+            }
+        }
+        None => {
+            let y0 = steady_of(m, c(u[0]))?;
+            st = m.state_at(c(u[0]), y0);
+        }
+    }
+    for &uk in &u[start..] {
+        out.push(m.simulate_step(&mut st, c(uk)).y);
+    }
+    Ok(out)
+}
+
+fn steady_of<T: Real>(m: &HostNarmax<T>, u: T) -> Result<T, Failure> {
+    let (_, ys) = m.scaling();
+    let tol = ys.std * T::from_f64(1e-7);
+    m.steady_output(u, tol, 200_000).ok_or_else(|| Failure {
+        code: 1,
+        message: format!("the model does not settle under a constant torque of {u:?} %"),
+    })
+}
+
+/// `simulate --model narmax`.
+pub fn simulate<T: Real + Display>(
+    m: &ModelFile,
+    series: &Series,
+    w: &mut dyn Write,
+) -> Result<(), Failure> {
+    let model = m.build::<T>().map_err(usage)?;
+    let y = free_run(&model, series)?;
+    writeln!(w, "t_s,torque_ref_pct,{}", m.target.column()).map_err(io)?;
+    for ((t, u), v) in series.t_s.iter().zip(&series.torque_ref_pct).zip(&y) {
+        writeln!(w, "{t},{u},{v}").map_err(io)?;
+    }
+    Ok(())
+}
+
+/// `steady --model narmax`.
+pub fn steady<T: Real + Display>(
+    m: &ModelFile,
+    torques: &[f64],
+    w: &mut dyn Write,
+) -> Result<(), Failure> {
+    let model = m.build::<T>().map_err(usage)?;
+    writeln!(w, "torque_ref_pct,{}", m.target.column()).map_err(io)?;
+    for &u in torques {
+        let y = steady_of(&model, T::from_f64(u))?;
+        writeln!(w, "{u},{y}").map_err(io)?;
+    }
+    Ok(())
+}
+
+/// Mean absolute percentage error, %, of `model` against `measured` (paper eqs. 1-2).
+pub fn mape_pct(measured: &[f64], model: &[f64]) -> f64 {
+    let n = measured.len().min(model.len());
+    100.0
+        * (0..n)
+            .map(|k| ((measured[k] - model[k]) / measured[k]).abs())
+            .sum::<f64>()
+        / n as f64
+}
+
+/// MAPE_d of the free-run simulation (seed rows skipped) and, with static data, MAPE_s.
+pub struct Validation {
+    /// Free-run samples compared.
+    pub samples: usize,
+    /// MAPE_d, %.
+    pub mape_d_pct: f64,
+    /// Static points and MAPE_s, %.
+    pub mape_s: Option<(usize, f64)>,
+}
+
+/// `validate`.
+///
+/// `statics` holds `(torque_ref_pct, measured steady output)` pairs.
+pub fn validate<T: Real>(
+    m: &ModelFile,
+    series: &Series,
+    statics: Option<&[(f64, f64)]>,
+) -> Result<Validation, Failure> {
+    let model = m.build::<T>().map_err(usage)?;
+    let y = series
+        .y
+        .as_ref()
+        .ok_or_else(|| usage("validation data needs the target column".into()))?;
+    let sim: Vec<f64> = free_run(&model, series)?
+        .iter()
+        .map(|v| v.to_f64())
+        .collect();
+    let skip = m.lags().max_lag();
+    let mape_d_pct = mape_pct(&y[skip..], &sim[skip..]);
+    let mape_s = match statics {
+        None => None,
+        Some(points) => {
+            let ys: Vec<f64> = points.iter().map(|p| p.1).collect();
+            let mut model_ys = Vec::with_capacity(ys.len());
+            for &(u, _) in points {
+                model_ys.push(steady_of(&model, T::from_f64(u))?.to_f64());
+            }
+            Some((ys.len(), mape_pct(&ys, &model_ys)))
+        }
+    };
+    Ok(Validation {
+        samples: y.len() - skip,
+        mape_d_pct,
+        mape_s,
+    })
+}
