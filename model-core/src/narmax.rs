@@ -23,6 +23,9 @@
 
 use crate::scalar::Real;
 
+#[path = "narmax_fixed.rs"]
+pub mod fixed;
+
 /// Largest input delay `nk` supported.
 pub const MAX_NK: usize = 8;
 

@@ -43,7 +43,7 @@ enum Precision {
     F64,
     /// Single precision, as on the MCU.
     F32,
-    /// Fixed point (Q15-class), as on the MCU (NARMAX only; not implemented yet).
+    /// Fixed point (Q15-class weights and tanh, I16F16 signals), as on the MCU (NARMAX only).
     Q15,
 }
 
@@ -248,8 +248,24 @@ fn need_weights(w: Option<PathBuf>) -> Result<modelfile::ModelFile, Failure> {
     modelfile::ModelFile::read(&path)
 }
 
-fn no_q15() -> Failure {
-    Failure::usage("--precision q15 is not implemented yet (f64 and f32 are)".into())
+/// Runs `$body` with `$model` bound to the NARMAX model of file `$m` in precision `$p`.
+macro_rules! with_narmax {
+    ($m:expr, $p:expr, |$model:ident| $body:expr) => {
+        match $p {
+            Precision::F64 => {
+                let $model = $m.build::<f64>().map_err(Failure::usage)?;
+                $body
+            }
+            Precision::F32 => {
+                let $model = $m.build::<f32>().map_err(Failure::usage)?;
+                $body
+            }
+            Precision::Q15 => {
+                let $model = narmaxcmd::quantized(&$m)?;
+                $body
+            }
+        }
+    };
 }
 
 fn run(cli: Cli) -> Result<(), Failure> {
@@ -308,11 +324,12 @@ fn run(cli: Cli) -> Result<(), Failure> {
                     Some(cols.rows.iter().map(|r| (r[0], r[1])).collect::<Vec<_>>())
                 }
             };
-            let v = match precision {
-                Precision::F64 => narmaxcmd::validate::<f64>(&m, &series, points.as_deref())?,
-                Precision::F32 => narmaxcmd::validate::<f32>(&m, &series, points.as_deref())?,
-                Precision::Q15 => return Err(no_q15()),
-            };
+            let v = with_narmax!(m, precision, |model| narmaxcmd::validate(
+                &model,
+                &m,
+                &series,
+                points.as_deref()
+            )?);
             println!("target={}", m.target.column());
             println!(
                 "mape_d_pct={:.4} (free run, {} samples after the seed rows)",
@@ -398,11 +415,10 @@ fn run(cli: Cli) -> Result<(), Failure> {
         } => {
             let m = need_weights(weights)?;
             let series = narmaxcmd::read_for_model(&m, &input, false)?;
-            output::write_csv(output.as_deref(), |w| match precision {
-                Precision::F64 => narmaxcmd::simulate::<f64>(&m, &series, w),
-                Precision::F32 => narmaxcmd::simulate::<f32>(&m, &series, w),
-                Precision::Q15 => Err(no_q15()),
-            })
+            with_narmax!(m, precision, |model| output::write_csv(
+                output.as_deref(),
+                |w| { narmaxcmd::simulate(&model, &m, &series, w) }
+            ))
         }
         Command::Steady {
             model: Model::Whitebox,
@@ -429,11 +445,10 @@ fn run(cli: Cli) -> Result<(), Failure> {
         } => {
             let m = need_weights(weights)?;
             let torques = simulate::parse_torque_list(&torque_pct).map_err(Failure::usage)?;
-            output::write_csv(output.as_deref(), |w| match precision {
-                Precision::F64 => narmaxcmd::steady::<f64>(&m, &torques, w),
-                Precision::F32 => narmaxcmd::steady::<f32>(&m, &torques, w),
-                Precision::Q15 => Err(no_q15()),
-            })
+            with_narmax!(m, precision, |model| output::write_csv(
+                output.as_deref(),
+                |w| { narmaxcmd::steady(&model, &m, &torques, w) }
+            ))
         }
     }
 }

@@ -16,6 +16,8 @@ pub const HOST_MAX_INPUTS: usize = 64;
 pub const HOST_MAX_HIDDEN: usize = 32;
 /// A NARMAX model as the host runs it (model-core, generous capacity).
 pub type HostNarmax<T> = Narmax<T, HOST_MAX_INPUTS, HOST_MAX_HIDDEN>;
+/// The fixed-point form of a host model.
+pub type HostNarmaxQ = model_core::narmax::fixed::NarmaxQ<HOST_MAX_INPUTS, HOST_MAX_HIDDEN>;
 
 /// What the model predicts.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]

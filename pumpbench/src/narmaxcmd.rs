@@ -1,12 +1,13 @@
 //! NARMAX commands: `identify`, and the narmax forms of `simulate`, `steady`, `validate`.
 
 use crate::input::{read_series, Series};
-use crate::modelfile::{HostNarmax, LagsFile, ModelFile, ScalingFile, Target, Training, FORMAT};
+use crate::modelfile::{
+    HostNarmax, HostNarmaxQ, LagsFile, ModelFile, ScalingFile, Target, Training, FORMAT,
+};
 use crate::train::{identify, Data, Structure};
 use crate::Failure;
 use indicatif::{ProgressBar, ProgressStyle};
 use model_core::Real;
-use std::fmt::Display;
 use std::io::Write;
 use std::path::Path;
 
@@ -177,52 +178,114 @@ pub fn read_for_model(m: &ModelFile, path: &Path, need_y: bool) -> Result<Series
     Ok(s)
 }
 
-/// Free-run simulation of `series` with the model in `T`: returns one output per row. If the
-/// series has the target column, its first max-lag rows seed the history and are returned as
-/// measured; otherwise the history starts at the model's own steady state for the first torque.
-pub fn free_run<T: Real>(m: &HostNarmax<T>, series: &Series) -> Result<Vec<T>, Failure> {
-    let c = T::from_f64;
+/// A NARMAX model in one of the arithmetics the host runs (f64, f32, fixed point), seen
+/// through physical f64 values at the edges.
+pub trait HostModel {
+    /// Its history.
+    type State;
+    /// Samples of history it needs.
+    fn max_lag(&self) -> usize;
+    /// History at (u, y).
+    fn start(&self, u: f64, y: f64) -> Self::State;
+    /// Pushes a measured sample.
+    fn seed(&self, st: &mut Self::State, u: f64, y: f64);
+    /// One free-run step.
+    fn step(&self, st: &mut Self::State, u: f64) -> f64;
+    /// Settled free-run output under constant u.
+    fn steady(&self, u: f64) -> Option<f64>;
+}
+
+impl<T: Real> HostModel for HostNarmax<T> {
+    type State = model_core::narmax::NarmaxState<T, { crate::modelfile::HOST_MAX_INPUTS }>;
+    fn max_lag(&self) -> usize {
+        self.lags().max_lag()
+    }
+    fn start(&self, u: f64, y: f64) -> Self::State {
+        self.state_at(T::from_f64(u), T::from_f64(y))
+    }
+    fn seed(&self, st: &mut Self::State, u: f64, y: f64) {
+        HostNarmax::seed(self, st, T::from_f64(u), T::from_f64(y));
+    }
+    fn step(&self, st: &mut Self::State, u: f64) -> f64 {
+        self.simulate_step(st, T::from_f64(u)).y.to_f64()
+    }
+    fn steady(&self, u: f64) -> Option<f64> {
+        // 1e-7 of the output's spread, or 64 ulps of the output's scale in T.
+        let ys = self.scaling().1;
+        let ulps = (ys.mean.abs() + T::from_f64(4.0) * ys.std) * T::EPSILON * T::from_f64(64.0);
+        let tol = (ys.std * T::from_f64(1e-7)).max(ulps);
+        self.steady_output(T::from_f64(u), tol, 200_000)
+            .map(T::to_f64)
+    }
+}
+
+impl HostModel for HostNarmaxQ {
+    type State = model_core::narmax::fixed::NarmaxQState<{ crate::modelfile::HOST_MAX_INPUTS }>;
+    fn max_lag(&self) -> usize {
+        self.lags().max_lag()
+    }
+    fn start(&self, u: f64, y: f64) -> Self::State {
+        self.state_at(u as f32, y as f32)
+    }
+    fn seed(&self, st: &mut Self::State, u: f64, y: f64) {
+        HostNarmaxQ::seed(self, st, u as f32, y as f32);
+    }
+    fn step(&self, st: &mut Self::State, u: f64) -> f64 {
+        f64::from(self.simulate_step(st, u as f32).y)
+    }
+    fn steady(&self, u: f64) -> Option<f64> {
+        self.steady_output(u as f32, 200_000).map(f64::from)
+    }
+}
+
+/// Free-run simulation of `series`: one output per row. If the series has the target column,
+/// its first max-lag rows seed the history and are returned as measured; otherwise the history
+/// starts at the model's own steady state for the first torque.
+pub fn free_run<M: HostModel>(m: &M, series: &Series) -> Result<Vec<f64>, Failure> {
     let u = &series.torque_ref_pct;
     let mut out = Vec::with_capacity(u.len());
     let mut st;
     let mut start = 0;
     match &series.y {
         Some(y) => {
-            st = m.state_at(c(u[0]), m.scaling().1.mean);
-            start = m.lags().max_lag().min(u.len());
+            st = m.start(u[0], y[0]);
+            start = m.max_lag().min(u.len());
             for k in 0..start {
-                m.seed(&mut st, c(u[k]), c(y[k]));
-                out.push(c(y[k]));
+                m.seed(&mut st, u[k], y[k]);
+                out.push(y[k]);
             }
         }
         None => {
-            let y0 = steady_of(m, c(u[0]))?;
-            st = m.state_at(c(u[0]), y0);
+            let y0 = steady_of(m, u[0])?;
+            st = m.start(u[0], y0);
         }
     }
     for &uk in &u[start..] {
-        out.push(m.simulate_step(&mut st, c(uk)).y);
+        out.push(m.step(&mut st, uk));
     }
     Ok(out)
 }
 
-fn steady_of<T: Real>(m: &HostNarmax<T>, u: T) -> Result<T, Failure> {
-    let (_, ys) = m.scaling();
-    let tol = ys.std * T::from_f64(1e-7);
-    m.steady_output(u, tol, 200_000).ok_or_else(|| Failure {
+fn steady_of<M: HostModel>(m: &M, u: f64) -> Result<f64, Failure> {
+    m.steady(u).ok_or_else(|| Failure {
         code: 1,
-        message: format!("the model does not settle under a constant torque of {u:?} %"),
+        message: format!("the model does not settle under a constant torque of {u} %"),
     })
 }
 
+/// The quantised (fixed-point) host model of a model file.
+pub fn quantized(m: &ModelFile) -> Result<HostNarmaxQ, Failure> {
+    HostNarmaxQ::quantize(&m.build::<f64>().map_err(usage)?).map_err(|e| usage(e.to_string()))
+}
+
 /// `simulate --model narmax`.
-pub fn simulate<T: Real + Display>(
+pub fn simulate<M: HostModel>(
+    model: &M,
     m: &ModelFile,
     series: &Series,
     w: &mut dyn Write,
 ) -> Result<(), Failure> {
-    let model = m.build::<T>().map_err(usage)?;
-    let y = free_run(&model, series)?;
+    let y = free_run(model, series)?;
     writeln!(w, "t_s,torque_ref_pct,{}", m.target.column()).map_err(io)?;
     for ((t, u), v) in series.t_s.iter().zip(&series.torque_ref_pct).zip(&y) {
         writeln!(w, "{t},{u},{v}").map_err(io)?;
@@ -231,15 +294,15 @@ pub fn simulate<T: Real + Display>(
 }
 
 /// `steady --model narmax`.
-pub fn steady<T: Real + Display>(
+pub fn steady<M: HostModel>(
+    model: &M,
     m: &ModelFile,
     torques: &[f64],
     w: &mut dyn Write,
 ) -> Result<(), Failure> {
-    let model = m.build::<T>().map_err(usage)?;
     writeln!(w, "torque_ref_pct,{}", m.target.column()).map_err(io)?;
     for &u in torques {
-        let y = steady_of(&model, T::from_f64(u))?;
+        let y = steady_of(model, u)?;
         writeln!(w, "{u},{y}").map_err(io)?;
     }
     Ok(())
@@ -268,20 +331,17 @@ pub struct Validation {
 /// `validate`.
 ///
 /// `statics` holds `(torque_ref_pct, measured steady output)` pairs.
-pub fn validate<T: Real>(
+pub fn validate<M: HostModel>(
+    model: &M,
     m: &ModelFile,
     series: &Series,
     statics: Option<&[(f64, f64)]>,
 ) -> Result<Validation, Failure> {
-    let model = m.build::<T>().map_err(usage)?;
     let y = series
         .y
         .as_ref()
         .ok_or_else(|| usage("validation data needs the target column".into()))?;
-    let sim: Vec<f64> = free_run(&model, series)?
-        .iter()
-        .map(|v| v.to_f64())
-        .collect();
+    let sim = free_run(model, series)?;
     let skip = m.lags().max_lag();
     let mape_d_pct = mape_pct(&y[skip..], &sim[skip..]);
     let mape_s = match statics {
@@ -290,7 +350,7 @@ pub fn validate<T: Real>(
             let ys: Vec<f64> = points.iter().map(|p| p.1).collect();
             let mut model_ys = Vec::with_capacity(ys.len());
             for &(u, _) in points {
-                model_ys.push(steady_of(&model, T::from_f64(u))?.to_f64());
+                model_ys.push(steady_of(model, u)?);
             }
             Some((ys.len(), mape_pct(&ys, &model_ys)))
         }
