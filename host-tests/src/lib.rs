@@ -10,5 +10,6 @@
 // `!(x > 0.0)` is deliberate throughout: unlike `x <= 0.0` it is also true for NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod narmax_ref;
 pub mod reference;
 pub mod stats;
