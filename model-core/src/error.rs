@@ -9,7 +9,8 @@ pub enum BenchError {
     NonFiniteTorque,
     /// The torque reference is outside 0..=100 % of nominal torque.
     TorqueOutOfRange,
-    /// The step or duration is NaN, infinite, ≤ 0, or above [`crate::MAX_STEP_S`].
+    /// The step or duration is NaN, infinite, negative, or the step is outside
+    /// [`crate::MIN_STEP_S`]..=[`crate::MAX_STEP_S`].
     InvalidStep,
     /// A parameter is invalid; the text says which rule it breaks.
     InvalidParameter(&'static str),
@@ -28,7 +29,7 @@ impl fmt::Display for BenchError {
             BenchError::TorqueOutOfRange => {
                 f.write_str("torque reference outside 0..=100 % of nominal torque")
             }
-            BenchError::InvalidStep => f.write_str("step must be finite, > 0 and <= 0.1 s"),
+            BenchError::InvalidStep => f.write_str("step must be finite, within 1e-6..=0.1 s"),
             BenchError::InvalidParameter(why) => write!(f, "invalid parameter: {why}"),
             BenchError::NoSteadyState => f.write_str("no steady state below the search limit"),
             BenchError::Diverged => f.write_str("integration produced a non-finite value"),

@@ -61,6 +61,6 @@ pub use error::BenchError;
 pub use params::BenchParams;
 pub use scalar::Real;
 pub use whitebox::{
-    BenchState, Extrapolation, Scheme, Signals, WhiteBox, MAX_STEP_S, STEADY_SCAN_STEP_RPM,
-    STEADY_SEARCH_MAX_RPM,
+    BenchState, Extrapolation, Scheme, Signals, WhiteBox, MAX_STEP_S, MIN_STEP_S,
+    STEADY_SCAN_STEP_RPM, STEADY_SEARCH_MAX_RPM,
 };

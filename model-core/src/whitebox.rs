@@ -14,6 +14,9 @@ use crate::scalar::Real;
 /// Largest integration step accepted, s. RK4 is stable up to ≈ 0.6 s at the bench's fastest
 /// time constant (≈ 0.22 s) and Euler up to ≈ 0.44 s; 0.1 s keeps every scheme well inside.
 pub const MAX_STEP_S: f64 = 0.1;
+/// Smallest integration step accepted, s (1 µs: a thousandth of the default step; smaller
+/// steps only add rounding and time).
+pub const MIN_STEP_S: f64 = 1e-6;
 /// Upper end of the steady-state search, rpm.
 pub const STEADY_SEARCH_MAX_RPM: f64 = 6000.0;
 /// Speed increment of the steady-state scan, rpm (the scan finds the lowest equilibrium, the
@@ -44,6 +47,8 @@ pub struct BenchState<T> {
     /// Kahan compensation of `speed_rpm`: keeps tiny f32 increments (small steps near
     /// equilibrium) from being rounded away.
     speed_carry_rpm: T,
+    /// The model's load generation `flow_lps` was solved for (see [`WhiteBox::set_load`]).
+    load_generation: u32,
 }
 
 impl<T: Real> BenchState<T> {
@@ -54,6 +59,7 @@ impl<T: Real> BenchState<T> {
             flow_lps: T::ZERO,
             torque_ref_pct: T::ZERO,
             speed_carry_rpm: T::ZERO,
+            load_generation: 0,
         }
     }
 }
@@ -107,6 +113,8 @@ pub struct WhiteBox<T> {
     system_k: T,
     /// rpm/s per % of torque surplus.
     accel: T,
+    /// Incremented by every load change, so a state's flow is re-solved after one.
+    load_generation: u32,
 }
 
 impl<T: Real> WhiteBox<T> {
@@ -130,6 +138,7 @@ impl<T: Real> WhiteBox<T> {
             system_k: params.pipe_k1 + params.valve_k2 * params.valve_k2,
             accel,
             params,
+            load_generation: 0,
         }
     }
 
@@ -139,7 +148,9 @@ impl<T: Real> WhiteBox<T> {
     }
 
     /// Changes the load: valve coefficient `k2` (√mca/(l/s), finite, ≥ 0) and static head `c`
-    /// (mca, finite). On error nothing changes.
+    /// (mca, finite). On error nothing changes. A state's flow, solved for the old load, is
+    /// re-solved by the next [`Self::step`] and [`Self::signals`] (a load generation is kept
+    /// in both).
     pub fn set_load(&mut self, valve_k2: T, static_head_c_mca: T) -> Result<(), BenchError> {
         if !valve_k2.is_finite() || !static_head_c_mca.is_finite() {
             return Err(BenchError::InvalidParameter("non-finite load"));
@@ -150,6 +161,7 @@ impl<T: Real> WhiteBox<T> {
         self.params.valve_k2 = valve_k2;
         self.params.static_head_c_mca = static_head_c_mca;
         self.system_k = self.params.pipe_k1 + valve_k2 * valve_k2;
+        self.load_generation = self.load_generation.wrapping_add(1);
         Ok(())
     }
 
@@ -213,7 +225,8 @@ impl<T: Real> WhiteBox<T> {
         scheme: Scheme,
     ) -> Result<(), BenchError> {
         Self::check_torque(torque_ref_pct)?;
-        if !dt_s.is_finite() || !(dt_s > T::ZERO) || dt_s > T::from_f64(MAX_STEP_S) {
+        if !dt_s.is_finite() || !(dt_s >= T::from_f64(MIN_STEP_S)) || dt_s > T::from_f64(MAX_STEP_S)
+        {
             return Err(BenchError::InvalidStep);
         }
         self.step_unchecked(state, torque_ref_pct, dt_s, scheme)
@@ -229,7 +242,7 @@ impl<T: Real> WhiteBox<T> {
     ) -> Result<(), BenchError> {
         let te = electromagnetic_torque_pct(&self.params.gamma, torque_ref_pct);
         let w0 = state.speed_rpm;
-        let q0 = state.flow_lps;
+        let q0 = self.current_flow(state);
         let k1 = self.derivative(te, w0, q0);
         let half = T::from_f64(0.5);
         let increment = match scheme {
@@ -258,6 +271,7 @@ impl<T: Real> WhiteBox<T> {
         state.speed_carry_rpm = carry;
         state.flow_lps = q1;
         state.torque_ref_pct = torque_ref_pct;
+        state.load_generation = self.load_generation;
         Ok(())
     }
 
@@ -277,7 +291,7 @@ impl<T: Real> WhiteBox<T> {
         if !duration_s.is_finite()
             || duration_s < 0.0
             || !max_step_s.is_finite()
-            || !(max_step_s > 0.0)
+            || !(max_step_s >= MIN_STEP_S)
             || max_step_s > MAX_STEP_S
         {
             return Err(BenchError::InvalidStep);
@@ -302,10 +316,20 @@ impl<T: Real> WhiteBox<T> {
         Ok(n)
     }
 
+    /// The state's flow, re-solved if the load changed since it was computed.
+    #[inline]
+    fn current_flow(&self, state: &BenchState<T>) -> T {
+        if state.load_generation == self.load_generation {
+            state.flow_lps
+        } else {
+            self.flow_at(state.speed_rpm, state.flow_lps)
+        }
+    }
+
     /// Every signal at `state` (pump head, pipe loss, torques, pressure, extrapolation flags).
     pub fn signals(&self, state: &BenchState<T>) -> Signals<T> {
         let w = state.speed_rpm;
-        let q = state.flow_lps;
+        let q = self.current_flow(state);
         let p = &self.params;
         Signals {
             speed_rpm: w,
@@ -387,6 +411,7 @@ impl<T: Real> WhiteBox<T> {
             flow_lps,
             torque_ref_pct,
             speed_carry_rpm: T::ZERO,
+            load_generation: self.load_generation,
         }
     }
 
@@ -442,6 +467,21 @@ mod tests {
             b.advance(&mut s, 30.0, -1.0, 1e-3, Scheme::Rk4),
             Err(BenchError::InvalidStep)
         );
+    }
+
+    #[test]
+    fn a_load_change_mid_run_re_solves_the_flow() {
+        let mut b = WhiteBox::<f64>::paper();
+        let mut s = b.steady_state(50.0).unwrap();
+        b.set_load(0.08, 0.3).unwrap();
+        let sig = b.signals(&s);
+        assert!((sig.pump_head_mca - sig.pipe_loss_mca - sig.pressure_mca).abs() < 1e-9);
+        // One step after the change equals one step from a state solved for the new load.
+        let mut fresh = b.state_at_speed(s.speed_rpm, 50.0).unwrap();
+        b.step(&mut s, 50.0, 1e-3, Scheme::Rk4).unwrap();
+        b.step(&mut fresh, 50.0, 1e-3, Scheme::Rk4).unwrap();
+        assert!((s.speed_rpm - fresh.speed_rpm).abs() < 1e-12 * fresh.speed_rpm);
+        assert!((s.flow_lps - fresh.flow_lps).abs() < 1e-12 * fresh.flow_lps);
     }
 
     #[test]

@@ -43,8 +43,42 @@ pub struct NumericColumns {
     pub columns: Vec<usize>,
 }
 
+/// Start offsets of the lines of `bytes` (terminated by `\n`, `\r\n` or a lone `\r`).
+///
+/// The csv crate's own line numbers are wrong after CRLF endings and blank lines
+/// (rust-csv #395, #208); its byte offsets are right, so lines are counted here.
+fn line_starts(bytes: &[u8]) -> Vec<usize> {
+    let mut starts = vec![0];
+    let mut i = 0;
+    while i < bytes.len() {
+        match bytes[i] {
+            b'\n' => starts.push(i + 1),
+            b'\r' if bytes.get(i + 1) != Some(&b'\n') => starts.push(i + 1),
+            _ => {}
+        }
+        i += 1;
+    }
+    starts
+}
+
+/// 1-based line of the record that the csv crate says starts at byte `offset`: its offset
+/// can point at the end of the previous line (the `\n` of a CRLF) or at skipped blank lines,
+/// so line terminators are stepped over first.
+fn line_of(bytes: &[u8], starts: &[usize], offset: u64) -> u64 {
+    let mut at = offset as usize;
+    while at < bytes.len() && matches!(bytes[at], b'\r' | b'\n') {
+        at += 1;
+    }
+    starts.partition_point(|&s| s <= at) as u64
+}
+
+/// A cell or header as shown in a one-line message: control characters escaped.
+fn shown(text: &str) -> String {
+    text.escape_debug().to_string()
+}
+
 /// Reads `path`, requiring the named columns (any order, other columns ignored) and parsing
-/// every cell of them as a finite number. Blank lines are skipped.
+/// every cell of them as a finite number. Blank and whitespace-only lines are skipped.
 pub fn read_columns(path: &Path, names: &[&str]) -> Result<NumericColumns, InputError> {
     let err = |line: Option<u64>, column: Option<(usize, String)>, message: String| InputError {
         path: path.to_path_buf(),
@@ -52,19 +86,23 @@ pub fn read_columns(path: &Path, names: &[&str]) -> Result<NumericColumns, Input
         column,
         message,
     };
-    let file =
-        std::fs::File::open(path).map_err(|e| err(None, None, format!("cannot open: {e}")))?;
+    let bytes = std::fs::read(path).map_err(|e| err(None, None, format!("cannot open: {e}")))?;
+    let starts = line_starts(&bytes);
     let mut reader = csv::ReaderBuilder::new()
         .has_headers(true)
         .trim(csv::Trim::All)
-        .from_reader(std::io::BufReader::new(file));
+        .flexible(true)
+        .from_reader(bytes.as_slice());
     let header = reader
         .headers()
         .map_err(|e| err(Some(1), None, format!("cannot read the header: {e}")))?
         .clone();
+    let header_line = header
+        .position()
+        .map_or(1, |p| line_of(&bytes, &starts, p.byte()));
     if header.is_empty() || header.iter().all(|h| h.is_empty()) {
         return Err(err(
-            Some(1),
+            Some(header_line),
             None,
             format!("empty file: expected a header row with {}", names.join(",")),
         ));
@@ -75,11 +113,11 @@ pub fn read_columns(path: &Path, names: &[&str]) -> Result<NumericColumns, Input
             Some(i) => columns.push(i),
             None => {
                 return Err(err(
-                    Some(1),
+                    Some(header_line),
                     None,
                     format!(
                         "missing column '{name}' (header is '{}')",
-                        header.iter().collect::<Vec<_>>().join(",")
+                        shown(&header.iter().collect::<Vec<_>>().join(","))
                     ),
                 ))
             }
@@ -93,11 +131,27 @@ pub fn read_columns(path: &Path, names: &[&str]) -> Result<NumericColumns, Input
             Ok(false) => break,
             Ok(true) => {}
             Err(e) => {
-                let line = e.position().map(|p| p.line());
+                let line = e.position().map(|p| line_of(&bytes, &starts, p.byte()));
                 return Err(err(line, None, format!("malformed row: {}", csv_kind(&e))));
             }
         }
-        let line = record.position().map_or(0, |p| p.line());
+        let line = record
+            .position()
+            .map_or(0, |p| line_of(&bytes, &starts, p.byte()));
+        if record.len() == 1 && record[0].is_empty() {
+            continue; // a whitespace-only line
+        }
+        if record.len() != header.len() {
+            return Err(err(
+                Some(line),
+                None,
+                format!(
+                    "malformed row: {} fields where the header has {}",
+                    record.len(),
+                    header.len()
+                ),
+            ));
+        }
         let mut row = Vec::with_capacity(columns.len());
         for (&c, name) in columns.iter().zip(names) {
             let cell = record.get(c).unwrap_or("");
@@ -105,14 +159,14 @@ pub fn read_columns(path: &Path, names: &[&str]) -> Result<NumericColumns, Input
                 err(
                     Some(line),
                     Some((c + 1, name.to_string())),
-                    format!("'{cell}' is not a number"),
+                    format!("'{}' is not a number", shown(cell)),
                 )
             })?;
             if !value.is_finite() {
                 return Err(err(
                     Some(line),
                     Some((c + 1, name.to_string())),
-                    format!("'{cell}' is not a finite number"),
+                    format!("'{}' is not a finite number", shown(cell)),
                 ));
             }
             row.push(value);
@@ -121,7 +175,11 @@ pub fn read_columns(path: &Path, names: &[&str]) -> Result<NumericColumns, Input
         lines.push(line);
     }
     if rows.is_empty() {
-        return Err(err(Some(2), None, "no data rows after the header".into()));
+        return Err(err(
+            Some(header_line + 1),
+            None,
+            "no data rows after the header".into(),
+        ));
     }
     Ok(NumericColumns {
         rows,
@@ -247,6 +305,33 @@ mod tests {
             "F:3: malformed row: 3 fields where the header has 2"
         );
         assert!(error_of("t_s,torque_ref_pct\n0,").contains("F:2:2 (torque_ref_pct): '' is not"));
+    }
+
+    #[test]
+    fn lines_are_right_with_crlf_cr_and_blank_lines() {
+        let bad = ": 'x' is not a number";
+        assert_eq!(
+            error_of("t_s,torque_ref_pct\r\n0,50\r\n1,60\r\n2,x\r\n"),
+            format!("F:4:2 (torque_ref_pct){bad}")
+        );
+        assert_eq!(
+            error_of("t_s,torque_ref_pct\r0,50\r1,60\r2,x\r"),
+            format!("F:4:2 (torque_ref_pct){bad}")
+        );
+        assert_eq!(
+            error_of("t_s,torque_ref_pct\n0,50\n\n\n\n1,x\n"),
+            format!("F:6:2 (torque_ref_pct){bad}")
+        );
+        assert_eq!(
+            error_of("t_s,torque_ref_pct\n0,50\n   \n1,x\n"),
+            format!("F:4:2 (torque_ref_pct){bad}")
+        );
+        assert!(error_of("t_s,torque_ref_pct\n0,50\n\n1,60\n\n1,70\n").starts_with("F:6:1 (t_s)"));
+        assert!(error_of("\n\nt_s,u\n0,1\n").starts_with("F:3: missing column"));
+        // A newline inside a quoted cell is escaped: the message stays on one line.
+        let e = error_of("t_s,torque_ref_pct\n0,50\n\"1\n2\",60\n");
+        assert_eq!(e.lines().count(), 1, "{e}");
+        assert!(e.contains("'1\\n2' is not a number"), "{e}");
     }
 }
 

@@ -66,7 +66,7 @@ enum Command {
         /// NARMAX model file (with --model narmax).
         #[arg(long)]
         weights: Option<PathBuf>,
-        /// Largest internal RK4 step, ms (0 < step <= 100). Each interval between input
+        /// Largest internal RK4 step, ms (0.001..=100). Each interval between input
         /// rows is split into equal steps no longer than this, so every input time is hit.
         #[arg(long, default_value_t = 1.0, value_parser = parse_step_ms)]
         step_ms: f64,
@@ -220,6 +220,7 @@ fn parse_step_ms(s: &str) -> Result<f64, String> {
 }
 
 /// A failure: its message (one line) and exit code.
+#[derive(Debug)]
 pub struct Failure {
     /// Exit code: 2 for bad input, 1 otherwise.
     pub code: u8,

@@ -21,6 +21,10 @@ fn model_fail(e: model_core::BenchError) -> Failure {
     }
 }
 
+/// Most RK4 steps one `simulate` may take (≈ 5 min of f64 on this machine); more is refused
+/// before any output, as a mistake in the input or in --step-ms.
+pub const MAX_TOTAL_STEPS: f64 = 2e9;
+
 /// Simulates `input` with the white-box bench in `T` arithmetic, RK4, steps ≤ `step_s`.
 pub fn whitebox<T: Real + Display, W: Write + ?Sized>(
     input: &TorqueInput,
@@ -29,6 +33,21 @@ pub fn whitebox<T: Real + Display, W: Write + ?Sized>(
 ) -> Result<(), Failure> {
     let bench = WhiteBox::<T>::paper();
     let n = input.t_s.len();
+    let steps: f64 = input
+        .t_s
+        .windows(2)
+        .map(|p| ((p[1] - p[0]) / step_s).ceil())
+        .sum();
+    if steps > MAX_TOTAL_STEPS {
+        return Err(Failure {
+            code: 2,
+            message: format!(
+                "the input needs {steps:.3e} steps of {} ms (more than {MAX_TOTAL_STEPS:e}): \
+                 use a larger --step-ms or a shorter input",
+                step_s * 1e3
+            ),
+        });
+    }
     let mut state = bench
         .steady_state(T::from_f64(input.torque_ref_pct[0]))
         .map_err(model_fail)?;
@@ -121,7 +140,9 @@ pub fn parse_torque_list(s: &str) -> Result<Vec<f64>, String> {
         if n > 100_000 {
             return Err(format!("--torque-pct: '{s}' gives more than 100000 points"));
         }
-        (0..=n).map(|k| a + k as f64 * step).collect()
+        // Rounded to 12 significant digits: 0.1:0.3:0.1 gives 0.3, not 0.30000000000000004.
+        let round = |v: f64| format!("{v:.12e}").parse::<f64>().unwrap_or(v);
+        (0..=n).map(|k| round(a + k as f64 * step)).collect()
     } else {
         s.split(',').map(num).collect::<Result<Vec<_>, _>>()?
     };
@@ -145,6 +166,10 @@ mod tests {
         assert_eq!(parse_torque_list("5:85:5").unwrap()[16], 85.0);
         assert_eq!(parse_torque_list("0:1:0.1").unwrap().len(), 11);
         assert_eq!(parse_torque_list("50").unwrap(), vec![50.0]);
+        assert_eq!(
+            parse_torque_list("0.1:0.3:0.1").unwrap(),
+            vec![0.1, 0.2, 0.3]
+        );
         for bad in [
             "", "5,,10", "a", "5:85", "5:85:0", "85:5:5", "-5", "101", "5:200:5", "nan",
         ] {
