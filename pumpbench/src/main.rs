@@ -8,6 +8,7 @@
 
 mod benchdata;
 mod excite;
+mod export;
 mod input;
 mod modelfile;
 mod narmaxcmd;
@@ -183,6 +184,16 @@ enum Command {
         /// Arithmetic.
         #[arg(long, value_enum, default_value = "f64")]
         precision: Precision,
+    },
+    /// A model file as Rust source for the firmware (f32 constants and a `model()`
+    /// constructor); e.g. `--output firmware/src/models/pressure.rs`, then build the firmware.
+    Export {
+        /// Model file.
+        #[arg(long)]
+        weights: PathBuf,
+        /// Rust file to write (stdout if omitted).
+        #[arg(long)]
+        output: Option<PathBuf>,
     },
     /// A SYNTHETIC bench record for a torque input: the white-box bench plus transmitter lags,
     /// noise and 12-bit quantisation. Demo data, not a measurement. CSV
@@ -379,6 +390,11 @@ fn run(cli: Cli) -> Result<(), Failure> {
                 max_hold_s,
             };
             output::write_csv(output.as_deref(), |w| excite::run(&o, w))
+        }
+        Command::Export { weights, output } => {
+            let m = modelfile::ModelFile::read(&weights)?;
+            let source = weights.display().to_string();
+            output::write_csv(output.as_deref(), |w| export::run(&m, &source, w))
         }
         Command::BenchData {
             input,

@@ -9,7 +9,14 @@
 //! Needs `qemu-system-arm` on the PATH for the QEMU steps (Debian: `qemu-system-arm`).
 
 use model_core::excitation::{PulseTrain, SteppedPulses};
+use model_core::narmax::fixed::NarmaxQ;
 use model_core::{Scheme, WhiteBox};
+
+/// The firmware's NARMAX models, the very files it compiles in.
+#[path = "../../firmware/src/models/flow.rs"]
+mod flow_model;
+#[path = "../../firmware/src/models/pressure.rs"]
+mod pressure_model;
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitCode, Stdio};
 use std::time::Instant;
@@ -50,13 +57,21 @@ fn firmware_elf() -> PathBuf {
     let target_dir = std::env::var_os("CARGO_TARGET_DIR")
         .map(PathBuf::from)
         .unwrap_or_else(|| root().join("target"));
-    target_dir.join(TARGET).join("release").join("firmware")
+    target_dir.join(TARGET).join("firmware").join("firmware")
 }
 
 fn build_firmware() -> Result {
     run(
-        "firmware build (release)",
-        cargo().args(["build", "-p", "firmware", "--release", "--target", TARGET]),
+        "firmware build (profile firmware: opt-level s, LTO)",
+        cargo().args([
+            "build",
+            "-p",
+            "firmware",
+            "--profile",
+            "firmware",
+            "--target",
+            TARGET,
+        ]),
     )
 }
 
@@ -122,25 +137,71 @@ fn check_golden(output: &str) -> Result<usize> {
     let seed: u64 = num(header, "seed")?;
     let duration_ms: u32 = num(header, "duration_ms")?;
     let mut samples = std::collections::BTreeMap::new();
-    for line in output.lines().filter(|l| l.starts_with("sample ")) {
+    let mut narmax_lines = std::collections::BTreeMap::new();
+    for line in output.lines() {
+        let into = if line.starts_with("sample ") {
+            &mut samples
+        } else if line.starts_with("narmax ") {
+            &mut narmax_lines
+        } else {
+            continue;
+        };
         let t: u32 = num(line, "t_ms")?;
-        samples.insert(t, field(line, "bits")?.to_string());
+        into.insert(t, field(line, "bits")?.to_string());
     }
     if !output.lines().any(|l| l == "done") {
         return Err("the firmware did not print 'done'".into());
     }
     let bench = WhiteBox::<f32>::paper();
-    let mut state = None;
+    let e = |e: model_core::narmax::NarmaxError| e.to_string();
+    let (p_f32, f_f32) = (
+        pressure_model::model().map_err(e)?,
+        flow_model::model().map_err(e)?,
+    );
+    let (p_q15, f_q15) = (
+        NarmaxQ::quantize(&p_f32).map_err(e)?,
+        NarmaxQ::quantize(&f_f32).map_err(e)?,
+    );
+    let p_ms = (pressure_model::SAMPLE_PERIOD_S * 1000.0 + 0.5) as u32;
+    let f_ms = (flow_model::SAMPLE_PERIOD_S * 1000.0 + 0.5) as u32;
+    let mut schedule = SteppedPulses::new(PulseTrain::paper(seed), step_ms).peekable();
+    let u0 = schedule.peek().map_or(0.0, |&(_, u)| u as f32);
+    let st = &mut bench.steady_state(u0).map_err(|e| e.to_string())?;
+    let s0 = bench.signals(st);
+    let p_st = &mut p_f32.state_at(u0, s0.pressure_mca);
+    let pq_st = &mut p_q15.state_at(u0, s0.pressure_mca);
+    let f_st = &mut f_f32.state_at(u0, s0.flow_lps);
+    let fq_st = &mut f_q15.state_at(u0, s0.flow_lps);
+    let (mut p, mut pq, mut f, mut fq) = (0.0f32, 0.0f32, 0.0f32, 0.0f32);
     let mut checked = 0;
-    for (t_ms, torque) in SteppedPulses::new(PulseTrain::paper(seed), step_ms) {
+    for (t_ms, torque) in schedule {
         if t_ms > duration_ms {
             break;
         }
         let u = torque as f32;
-        let st = match state.as_mut() {
-            Some(s) => s,
-            None => state.insert(bench.steady_state(u).map_err(|e| e.to_string())?),
-        };
+        if t_ms % p_ms == 0 {
+            p = p_f32.simulate_step(p_st, u).y;
+            pq = p_q15.simulate_step(pq_st, u).y;
+        }
+        if t_ms % f_ms == 0 {
+            f = f_f32.simulate_step(f_st, u).y;
+            fq = f_q15.simulate_step(fq_st, u).y;
+        }
+        if let Some(bits) = narmax_lines.get(&t_ms) {
+            let host = format!(
+                "{:08x},{:08x},{:08x},{:08x}",
+                p.to_bits(),
+                pq.to_bits(),
+                f.to_bits(),
+                fq.to_bits()
+            );
+            if *bits != host {
+                return Err(format!(
+                    "t_ms={t_ms}: firmware NARMAX bits {bits}, host bits {host} (pressure {p} {pq}, flow {f} {fq})"
+                ));
+            }
+            checked += 1;
+        }
         if let Some(bits) = samples.get(&t_ms) {
             let s = bench.signals(st);
             let host = format!(
@@ -161,8 +222,9 @@ fn check_golden(output: &str) -> Result<usize> {
             .step(st, u, step_ms as f32 * 1e-3, Scheme::Rk4)
             .map_err(|e| e.to_string())?;
     }
-    if checked != samples.len() || checked == 0 {
-        return Err(format!("checked {checked} of {} samples", samples.len()));
+    let total = samples.len() + narmax_lines.len();
+    if checked != total || checked == 0 {
+        return Err(format!("checked {checked} of {total} lines"));
     }
     Ok(checked)
 }
@@ -206,6 +268,14 @@ fn qemu() -> Result {
         "≈ {:.0} instructions per RK4 step (SysTick ticks / 0.168 under -icount shift=0)",
         ticks / 0.168
     );
+    if let Some(l) = out.lines().find(|l| l.starts_with("timing narmax")) {
+        let mut parts = vec![];
+        for key in ["pressure_f32", "pressure_q15", "flow_f32", "flow_q15"] {
+            let t: f64 = num(l, key)?;
+            parts.push(format!("{key} ≈ {:.0}", t / 0.168));
+        }
+        println!("instructions per NARMAX step: {}", parts.join(", "));
+    }
     Ok(())
 }
 
@@ -235,7 +305,9 @@ fn test() -> Result {
     eprintln!("==> QEMU smoke run (netduinoplus2, -icount shift=0)");
     let out = qemu_output(&elf)?;
     let n = check_golden(&out)?;
-    println!("QEMU smoke run: {n} samples equal model-core f32 on the host, bit for bit");
+    println!(
+        "QEMU smoke run: {n} lines (white-box, NARMAX f32 and fixed point) equal model-core on the host, bit for bit"
+    );
     eprintln!(
         "all checks passed in {:.0} s",
         start.elapsed().as_secs_f64()
