@@ -243,3 +243,66 @@ fn bad_and_mismatched_models_fail_with_one_line_and_exit_2() {
     }
     assert!(!Path::new("x.json").exists());
 }
+
+/// The shipped models on a fresh 300 s synthetic record: fixed point and f32 within 0.1
+/// MAPE points of f64, and all of them under the paper's black-box MAPE_d.
+#[test]
+fn shipped_models_fixed_point_within_a_tenth_of_a_point_over_300_s() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    for (model, ts, seed, paper) in [("pressure", "50", 21, 1.22), ("flow", "100", 22, 1.10)] {
+        let u = dir.path().join(format!("u_{model}.csv"));
+        let d = dir.path().join(format!("d_{model}.csv"));
+        let (u, d) = (u.to_str().unwrap(), d.to_str().unwrap());
+        let seed = seed.to_string();
+        stdout(&pumpbench(&[
+            "excite",
+            "--seed",
+            &seed,
+            "--seconds",
+            "300",
+            "--ts-ms",
+            ts,
+            "--output",
+            u,
+        ]));
+        stdout(&pumpbench(&[
+            "bench-data",
+            "--input",
+            u,
+            "--seed",
+            &seed,
+            "--output",
+            d,
+        ]));
+        let weights = root.join("models").join(format!("{model}.json"));
+        let w = weights.to_str().unwrap();
+        let m = |p: &str| {
+            mape(&stdout(&pumpbench(&[
+                "validate",
+                "--weights",
+                w,
+                "--data",
+                d,
+                "--precision",
+                p,
+            ])))
+        };
+        let (f64_, f32_, q15) = (m("f64"), m("f32"), m("q15"));
+        eprintln!(
+            "{model}: MAPE_d f64 {f64_:.4} %, f32 {f32_:.4} %, q15 {q15:.4} % (paper {paper} %)"
+        );
+        assert!(
+            (q15 - f64_).abs() <= 0.1,
+            "{model}: q15 {q15} vs f64 {f64_}"
+        );
+        assert!(
+            (f32_ - f64_).abs() <= 0.01,
+            "{model}: f32 {f32_} vs f64 {f64_}"
+        );
+        assert!(
+            f64_ <= paper,
+            "{model}: {f64_} % above the paper's {paper} %"
+        );
+    }
+}
