@@ -236,7 +236,7 @@ pub fn marquardt(
                 .unwrap_or_else(|| pass(s, &w, d, true).psi.unwrap_or_default());
             let e = DVector::from_column_slice(&first.e);
             let g = psi.tr_mul(&e);
-            let r = psi.tr_mul(&psi);
+            let r = psi.transpose() * &psi;
             rg = Some((r, g));
         }
         let Some((r, g)) = rg.as_ref() else {
