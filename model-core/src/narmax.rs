@@ -136,6 +136,62 @@ pub struct NarmaxState<T, const N: usize> {
     delay: [T; MAX_NK],
 }
 
+impl<V: Copy + PartialOrd, const N: usize> NarmaxState<V, N> {
+    /// Every past input at `zu`, every past output at `zy`, errors at `zero` (scaled values).
+    fn filled(zu: V, zy: V, zero: V) -> Self {
+        Self {
+            y: [zy; N],
+            u: [zu; N],
+            e: [zero; N],
+            delay: [zu; MAX_NK],
+        }
+    }
+
+    /// Takes the scaled input u(t): through the nk-sample delay line into the u register.
+    fn push_u(&mut self, lags: Lags, z: V) {
+        let nk = lags.nk;
+        let delayed = if nk == 0 {
+            z
+        } else {
+            let out = self.delay[nk - 1];
+            shift_in(&mut self.delay[..nk], z);
+            out
+        };
+        shift_in(&mut self.u[..lags.nb], delayed);
+    }
+
+    /// Takes the scaled output y(t) and error ε(t) (after a prediction or a seed).
+    fn push_y_e(&mut self, lags: Lags, y: V, e: V) {
+        shift_in(&mut self.y[..lags.na], y);
+        shift_in(&mut self.e[..lags.nc], e);
+    }
+
+    /// The regressor vector, y and u clamped to their training ranges; `true` if any was.
+    fn regressors(&self, lags: Lags, u_range: &[V; 2], y_range: &[V; 2], phi: &mut [V; N]) -> bool {
+        let Lags { na, nb, nc, .. } = lags;
+        let mut clamped = false;
+        let mut clamp = |x: V, r: &[V; 2]| {
+            if x < r[0] {
+                clamped = true;
+                r[0]
+            } else if x > r[1] {
+                clamped = true;
+                r[1]
+            } else {
+                x
+            }
+        };
+        for (p, &y) in phi[..na].iter_mut().zip(&self.y[..na]) {
+            *p = clamp(y, y_range);
+        }
+        for (p, &u) in phi[na..na + nb].iter_mut().zip(&self.u[..nb]) {
+            *p = clamp(u, u_range);
+        }
+        phi[na + nb..na + nb + nc].copy_from_slice(&self.e[..nc]);
+        clamped
+    }
+}
+
 /// One model output.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct NarmaxOutput<T> {
@@ -251,70 +307,29 @@ impl<T: Real, const N: usize, const H: usize> Narmax<T, N, H> {
 
     /// A state with every past value at the scaled point of `u`, `y` (physical), no errors.
     pub fn state_at(&self, u: T, y: T) -> NarmaxState<T, N> {
-        let (zu, zy) = (self.u_scale.scale(u), self.y_scale.scale(y));
-        NarmaxState {
-            y: [zy; N],
-            u: [zu; N],
-            e: [T::ZERO; N],
-            delay: [zu; MAX_NK],
-        }
+        NarmaxState::filled(self.u_scale.scale(u), self.y_scale.scale(y), T::ZERO)
     }
 
     /// Puts one measured sample `(u(t), y(t))` into the history without predicting: to seed
     /// the first `lags().max_lag()` samples of a run from data.
     pub fn seed(&self, st: &mut NarmaxState<T, N>, u: T, y: T) {
-        self.push_u(st, u);
-        shift_in(&mut st.y[..self.lags.na], self.y_scale.scale(y));
-        shift_in(&mut st.e[..self.lags.nc], T::ZERO);
+        st.push_u(self.lags, self.u_scale.scale(u));
+        st.push_y_e(self.lags, self.y_scale.scale(y), T::ZERO);
     }
 
-    fn push_u(&self, st: &mut NarmaxState<T, N>, u: T) {
-        let z = self.u_scale.scale(u);
-        let nk = self.lags.nk;
-        let delayed = if nk == 0 {
-            z
-        } else {
-            let out = st.delay[nk - 1];
-            shift_in(&mut st.delay[..nk], z);
-            out
-        };
-        shift_in(&mut st.u[..self.lags.nb], delayed);
-    }
-
-    /// Regressors for the current sample (clamped), and whether any was clamped.
-    fn regressors(&self, st: &NarmaxState<T, N>, phi: &mut [T; N]) -> bool {
-        let Lags { na, nb, nc, .. } = self.lags;
-        let mut clamped = false;
-        let mut clamp = |x: T, r: &[T; 2]| {
-            if x < r[0] {
-                clamped = true;
-                r[0]
-            } else if x > r[1] {
-                clamped = true;
-                r[1]
-            } else {
-                x
-            }
-        };
-        for (p, &y) in phi[..na].iter_mut().zip(&st.y[..na]) {
-            *p = clamp(y, &self.y_range);
-        }
-        for (p, &u) in phi[na..na + nb].iter_mut().zip(&st.u[..nb]) {
-            *p = clamp(u, &self.u_range);
-        }
-        phi[na + nb..na + nb + nc].copy_from_slice(&st.e[..nc]);
-        clamped
+    /// Takes u(t), returns the network's scaled ŷ(t) and the clamp flag.
+    fn predict_scaled(&self, st: &mut NarmaxState<T, N>, u: T) -> (T, bool) {
+        st.push_u(self.lags, self.u_scale.scale(u));
+        let mut phi = [T::ZERO; N];
+        let clamped = st.regressors(self.lags, &self.u_range, &self.y_range, &mut phi);
+        (self.network(&phi), clamped)
     }
 
     /// Free-run simulation: takes u(t) (physical), returns ŷ(t) and feeds it back as the next
     /// y(t−1); error regressors are zero.
     pub fn simulate_step(&self, st: &mut NarmaxState<T, N>, u: T) -> NarmaxOutput<T> {
-        self.push_u(st, u);
-        let mut phi = [T::ZERO; N];
-        let clamped = self.regressors(st, &mut phi);
-        let z = self.network(&phi);
-        shift_in(&mut st.y[..self.lags.na], z);
-        shift_in(&mut st.e[..self.lags.nc], T::ZERO);
+        let (z, clamped) = self.predict_scaled(st, u);
+        st.push_y_e(self.lags, z, T::ZERO);
         NarmaxOutput {
             y: self.y_scale.unscale(z),
             clamped,
@@ -324,13 +339,9 @@ impl<T: Real, const N: usize, const H: usize> Narmax<T, N, H> {
     /// One-step-ahead prediction: takes u(t) and the measurement y(t) (physical), returns
     /// ŷ(t) predicted from the past only, then stores y(t) and ε(t) = y(t) − ŷ(t).
     pub fn predict_step(&self, st: &mut NarmaxState<T, N>, u: T, y_measured: T) -> NarmaxOutput<T> {
-        self.push_u(st, u);
-        let mut phi = [T::ZERO; N];
-        let clamped = self.regressors(st, &mut phi);
-        let z = self.network(&phi);
+        let (z, clamped) = self.predict_scaled(st, u);
         let zy = self.y_scale.scale(y_measured);
-        shift_in(&mut st.y[..self.lags.na], zy);
-        shift_in(&mut st.e[..self.lags.nc], zy - z);
+        st.push_y_e(self.lags, zy, zy - z);
         NarmaxOutput {
             y: self.y_scale.unscale(z),
             clamped,

@@ -21,7 +21,7 @@
 //! [`NarmaxQ::one_step_error_bound`] bounds the one-step difference to the exact (real
 //! arithmetic) network from these formats; host-tests checks it against an f64 network.
 
-use super::{shift_in, Lags, Narmax, NarmaxError, NarmaxOutput, Scaling, MAX_NK};
+use super::{Lags, Narmax, NarmaxError, NarmaxOutput, NarmaxState, Scaling};
 use crate::scalar::Real;
 use fixed::types::{I16F16, I1F15};
 
@@ -99,13 +99,7 @@ pub struct NarmaxQ<const N: usize, const H: usize> {
 }
 
 /// History of a running quantised model.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct NarmaxQState<const N: usize> {
-    y: [I16F16; N],
-    u: [I16F16; N],
-    e: [I16F16; N],
-    delay: [I16F16; MAX_NK],
-}
+pub type NarmaxQState<const N: usize> = NarmaxState<I16F16, N>;
 
 impl<const N: usize, const H: usize> NarmaxQ<N, H> {
     /// Quantises a float model (the only way to build one).
@@ -201,59 +195,29 @@ impl<const N: usize, const H: usize> NarmaxQ<N, H> {
 
     /// History with every past value at (u, y) (physical), no errors.
     pub fn state_at(&self, u: f32, y: f32) -> NarmaxQState<N> {
-        let zu = self.scale_u(u);
-        let zy = I16F16::saturating_from_num(self.y_scale.scale(y));
-        NarmaxQState {
-            y: [zy; N],
-            u: [zu; N],
-            e: [I16F16::ZERO; N],
-            delay: [zu; MAX_NK],
-        }
+        NarmaxState::filled(self.scale_u(u), self.scale_y(y), I16F16::ZERO)
     }
 
     fn scale_u(&self, u: f32) -> I16F16 {
         I16F16::saturating_from_num(self.u_scale.scale(u))
     }
 
-    fn push_u(&self, st: &mut NarmaxQState<N>, u: f32) {
-        let z = self.scale_u(u);
-        let nk = self.lags.nk;
-        let delayed = if nk == 0 {
-            z
-        } else {
-            let out = st.delay[nk - 1];
-            shift_in(&mut st.delay[..nk], z);
-            out
-        };
-        shift_in(&mut st.u[..self.lags.nb], delayed);
+    fn scale_y(&self, y: f32) -> I16F16 {
+        I16F16::saturating_from_num(self.y_scale.scale(y))
     }
 
     /// Puts one measured sample into the history without predicting.
     pub fn seed(&self, st: &mut NarmaxQState<N>, u: f32, y: f32) {
-        self.push_u(st, u);
-        shift_in(
-            &mut st.y[..self.lags.na],
-            I16F16::saturating_from_num(self.y_scale.scale(y)),
-        );
-        shift_in(&mut st.e[..self.lags.nc], I16F16::ZERO);
+        st.push_u(self.lags, self.scale_u(u));
+        st.push_y_e(self.lags, self.scale_y(y), I16F16::ZERO);
     }
 
-    fn regressors(&self, st: &NarmaxQState<N>, phi: &mut [I16F16; N]) -> bool {
-        let Lags { na, nb, nc, .. } = self.lags;
-        let mut clamped = false;
-        let mut clamp = |x: I16F16, r: &[I16F16; 2]| {
-            let c = x.clamp(r[0], r[1]);
-            clamped |= c != x;
-            c
-        };
-        for (p, &y) in phi[..na].iter_mut().zip(&st.y[..na]) {
-            *p = clamp(y, &self.y_range);
-        }
-        for (p, &u) in phi[na..na + nb].iter_mut().zip(&st.u[..nb]) {
-            *p = clamp(u, &self.u_range);
-        }
-        phi[na + nb..na + nb + nc].copy_from_slice(&st.e[..nc]);
-        clamped
+    /// Takes u(t), returns the network's scaled ŷ(t) and the clamp flag.
+    fn predict_scaled(&self, st: &mut NarmaxQState<N>, u: f32) -> (I16F16, bool) {
+        st.push_u(self.lags, self.scale_u(u));
+        let mut phi = [I16F16::ZERO; N];
+        let clamped = st.regressors(self.lags, &self.u_range, &self.y_range, &mut phi);
+        (self.network(&phi), clamped)
     }
 
     fn output(&self, z: I16F16, clamped: bool) -> NarmaxOutput<f32> {
@@ -265,12 +229,8 @@ impl<const N: usize, const H: usize> NarmaxQ<N, H> {
 
     /// Free-run simulation step (see [`Narmax::simulate_step`]).
     pub fn simulate_step(&self, st: &mut NarmaxQState<N>, u: f32) -> NarmaxOutput<f32> {
-        self.push_u(st, u);
-        let mut phi = [I16F16::ZERO; N];
-        let clamped = self.regressors(st, &mut phi);
-        let z = self.network(&phi);
-        shift_in(&mut st.y[..self.lags.na], z);
-        shift_in(&mut st.e[..self.lags.nc], I16F16::ZERO);
+        let (z, clamped) = self.predict_scaled(st, u);
+        st.push_y_e(self.lags, z, I16F16::ZERO);
         self.output(z, clamped)
     }
 
@@ -281,13 +241,9 @@ impl<const N: usize, const H: usize> NarmaxQ<N, H> {
         u: f32,
         y_measured: f32,
     ) -> NarmaxOutput<f32> {
-        self.push_u(st, u);
-        let mut phi = [I16F16::ZERO; N];
-        let clamped = self.regressors(st, &mut phi);
-        let z = self.network(&phi);
-        let zy = I16F16::saturating_from_num(self.y_scale.scale(y_measured));
-        shift_in(&mut st.y[..self.lags.na], zy);
-        shift_in(&mut st.e[..self.lags.nc], zy.saturating_sub(z));
+        let (z, clamped) = self.predict_scaled(st, u);
+        let zy = self.scale_y(y_measured);
+        st.push_y_e(self.lags, zy, zy.saturating_sub(z));
         self.output(z, clamped)
     }
 
@@ -301,7 +257,7 @@ impl<const N: usize, const H: usize> NarmaxQ<N, H> {
         let (mut calm, mut last, mut sum) = (0usize, i32::MAX, 0i64);
         for _ in 0..max_steps {
             let z = self.simulate_step(&mut st, u);
-            let bits = I16F16::saturating_from_num(self.y_scale.scale(z.y)).to_bits();
+            let bits = self.scale_y(z.y).to_bits();
             if (i64::from(bits) - i64::from(last)).abs() <= i64::from(STEADY_LSB) {
                 calm += 1;
                 sum += i64::from(bits);
