@@ -163,6 +163,20 @@ pub fn run_identify(o: &Identify) -> Result<ModelFile, Failure> {
     Ok(file)
 }
 
+/// Writes a model file (pretty JSON and a final newline), complete or not at all.
+pub fn write_model(path: &Path, model: &ModelFile) -> Result<(), Failure> {
+    crate::output::write_csv(Some(path), |w| {
+        serde_json::to_writer_pretty(&mut *w, model).map_err(|e| Failure {
+            code: 1,
+            message: format!("cannot write the model: {e}"),
+        })?;
+        writeln!(w).map_err(|e| Failure {
+            code: 1,
+            message: e.to_string(),
+        })
+    })
+}
+
 /// Reads a data file for a model and checks its sample period against the model's.
 pub fn read_for_model(m: &ModelFile, path: &Path, need_y: bool) -> Result<Series, Failure> {
     let s = read_series(path, m.target.column(), need_y)?;
@@ -206,7 +220,9 @@ pub fn free_run<T: Real>(m: &HostNarmax<T>, series: &Series) -> Result<Vec<T>, F
     Ok(out)
 }
 
-fn steady_of<T: Real>(m: &HostNarmax<T>, u: T) -> Result<T, Failure> {
+/// The model's steady output under a constant torque `u` (%), to 1e-7 of the output's
+/// standard deviation; a model that does not settle is an error (code 1).
+pub fn steady_of<T: Real>(m: &HostNarmax<T>, u: T) -> Result<T, Failure> {
     let (_, ys) = m.scaling();
     let tol = ys.std * T::from_f64(1e-7);
     m.steady_output(u, tol, 200_000).ok_or_else(|| Failure {
