@@ -13,7 +13,9 @@ mod input;
 mod modelfile;
 mod narmaxcmd;
 mod output;
+mod plots;
 mod simulate;
+mod study;
 mod train;
 
 use clap::{Parser, Subcommand, ValueEnum};
@@ -195,6 +197,34 @@ enum Command {
         #[arg(long)]
         output: Option<PathBuf>,
     },
+    /// The paper's study end to end: identify the pressure (na=6 nb=6, 7 hidden) and flow
+    /// (na=7 nb=7, 6 hidden) NARMAX models, validate them and the white-box model, and write
+    /// the models, table1.md (MAPE_s / MAPE_d as the paper's Table 1, beside the paper's own
+    /// numbers) and figures 4, 5, 7 and 8 (PNG) into --out. Prints the table.
+    Study {
+        /// Pressure training record: t_s, torque_ref_pct, pressure_mca (uniformly sampled).
+        #[arg(long, required_unless_present = "demo")]
+        train_pressure: Option<PathBuf>,
+        /// Flow training record: t_s, torque_ref_pct, flow_lps (uniformly sampled).
+        #[arg(long, required_unless_present = "demo")]
+        train_flow: Option<PathBuf>,
+        /// Pressure validation record (same sample period as its training record).
+        #[arg(long, required_unless_present = "demo")]
+        val_pressure: Option<PathBuf>,
+        /// Flow validation record (same sample period as its training record).
+        #[arg(long, required_unless_present = "demo")]
+        val_flow: Option<PathBuf>,
+        /// Steady-state points: torque_ref_pct, pressure_mca, flow_lps.
+        #[arg(long = "static", required_unless_present = "demo")]
+        statics: Option<PathBuf>,
+        /// Make SYNTHETIC data instead (excite + bench-data, fixed seeds) and write it into
+        /// --out too; the five files are then not given.
+        #[arg(long, conflicts_with_all = ["train_pressure", "train_flow", "val_pressure", "val_flow", "statics"])]
+        demo: bool,
+        /// Output folder (created if missing).
+        #[arg(long)]
+        out: PathBuf,
+    },
     /// A SYNTHETIC bench record for a torque input: the white-box bench plus transmitter lags,
     /// noise and 12-bit quantisation. Demo data, not a measurement. CSV
     /// `t_s,torque_ref_pct,speed_rpm,flow_lps,pressure_mca`, one row per input row.
@@ -310,16 +340,7 @@ fn run(cli: Cli) -> Result<(), Failure> {
                 seed,
             };
             let model = narmaxcmd::run_identify(&o)?;
-            output::write_csv(Some(&output), |w| {
-                serde_json::to_writer_pretty(&mut *w, &model).map_err(|e| Failure {
-                    code: 1,
-                    message: format!("cannot write the model: {e}"),
-                })?;
-                writeln!(w).map_err(|e| Failure {
-                    code: 1,
-                    message: e.to_string(),
-                })
-            })
+            narmaxcmd::write_model(&output, &model)
         }
         Command::Validate {
             weights,
@@ -403,6 +424,41 @@ fn run(cli: Cli) -> Result<(), Failure> {
         } => {
             let data = input::read_torque_input(&input)?;
             output::write_csv(output.as_deref(), |w| benchdata::run(&data, seed, w))
+        }
+        Command::Study {
+            train_pressure,
+            train_flow,
+            val_pressure,
+            val_flow,
+            statics,
+            demo,
+            out,
+        } => {
+            let files = match (
+                demo,
+                train_pressure,
+                train_flow,
+                val_pressure,
+                val_flow,
+                statics,
+            ) {
+                (false, Some(tp), Some(tf), Some(vp), Some(vf), Some(st)) => Some(study::Files {
+                    train_pressure: tp,
+                    train_flow: tf,
+                    val_pressure: vp,
+                    val_flow: vf,
+                    statics: st,
+                }),
+                (true, ..) => None,
+                _ => {
+                    return Err(Failure::usage(
+                        "study needs --demo or all of --train-pressure, --train-flow, \
+                         --val-pressure, --val-flow, --static"
+                            .into(),
+                    ))
+                }
+            };
+            study::run(&study::Study { files, out })
         }
         Command::Simulate {
             model: Model::Whitebox,

@@ -164,6 +164,20 @@ pub fn run_identify(o: &Identify) -> Result<ModelFile, Failure> {
     Ok(file)
 }
 
+/// Writes a model file (pretty JSON and a final newline), complete or not at all.
+pub fn write_model(path: &Path, model: &ModelFile) -> Result<(), Failure> {
+    crate::output::write_csv(Some(path), |w| {
+        serde_json::to_writer_pretty(&mut *w, model).map_err(|e| Failure {
+            code: 1,
+            message: format!("cannot write the model: {e}"),
+        })?;
+        writeln!(w).map_err(|e| Failure {
+            code: 1,
+            message: e.to_string(),
+        })
+    })
+}
+
 /// Reads a data file for a model and checks its sample period against the model's.
 pub fn read_for_model(m: &ModelFile, path: &Path, need_y: bool) -> Result<Series, Failure> {
     let s = read_series(path, m.target.column(), need_y)?;
@@ -266,7 +280,9 @@ pub fn free_run<M: HostModel>(m: &M, series: &Series) -> Result<Vec<f64>, Failur
     Ok(out)
 }
 
-fn steady_of<M: HostModel>(m: &M, u: f64) -> Result<f64, Failure> {
+/// The model's steady output under a constant torque `u` (%); a model that does not settle is
+/// an error (code 1).
+pub fn steady_of<M: HostModel>(m: &M, u: f64) -> Result<f64, Failure> {
     m.steady(u).ok_or_else(|| Failure {
         code: 1,
         message: format!("the model does not settle under a constant torque of {u} %"),
