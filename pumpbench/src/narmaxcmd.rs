@@ -325,13 +325,22 @@ pub fn steady<M: HostModel>(
 }
 
 /// Mean absolute percentage error, %, of `model` against `measured` (paper eqs. 1-2).
+///
+/// Samples whose measurement is exactly 0 (the relative error is undefined there) are left
+/// out; [`zero_measurements`] counts them so callers can say so.
 pub fn mape_pct(measured: &[f64], model: &[f64]) -> f64 {
     let n = measured.len().min(model.len());
-    100.0
-        * (0..n)
-            .map(|k| ((measured[k] - model[k]) / measured[k]).abs())
-            .sum::<f64>()
-        / n as f64
+    let (sum, count) = (0..n)
+        .filter(|&k| measured[k] != 0.0)
+        .fold((0.0, 0usize), |(s, c), k| {
+            (s + ((measured[k] - model[k]) / measured[k]).abs(), c + 1)
+        });
+    100.0 * sum / count.max(1) as f64
+}
+
+/// How many measurements [`mape_pct`] leaves out (exactly 0).
+pub fn zero_measurements(measured: &[f64]) -> usize {
+    measured.iter().filter(|&&v| v == 0.0).count()
 }
 
 /// MAPE_d of the free-run simulation (seed rows skipped) and, with static data, MAPE_s.
@@ -360,6 +369,10 @@ pub fn validate<M: HostModel>(
     let sim = free_run(model, series)?;
     let skip = m.lags().max_lag();
     let mape_d_pct = mape_pct(&y[skip..], &sim[skip..]);
+    let zeros = zero_measurements(&y[skip..]);
+    if zeros > 0 {
+        eprintln!("validate: {zeros} samples with a measurement of exactly 0 left out of MAPE_d");
+    }
     let mape_s = match statics {
         None => None,
         Some(points) => {
@@ -376,4 +389,38 @@ pub fn validate<M: HostModel>(
         mape_d_pct,
         mape_s,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn mape_leaves_zero_measurements_out() {
+        assert!((mape_pct(&[2.0, 4.0], &[2.2, 4.0]) - 5.0).abs() < 1e-12);
+        assert!((mape_pct(&[2.0, 0.0, 4.0], &[2.2, 1.0, 4.0]) - 5.0).abs() < 1e-12);
+        assert_eq!(zero_measurements(&[2.0, 0.0, -0.0]), 2);
+        assert_eq!(mape_pct(&[0.0], &[1.0]), 0.0);
+    }
+
+    #[test]
+    fn sampling_jitter_is_accepted_up_to_ten_percent() {
+        let dir = tempfile::tempdir().unwrap();
+        let ok = dir.path().join("jitter.csv");
+        std::fs::write(
+            &ok,
+            "t_s,torque_ref_pct,flow_lps\n0,10,1\n0.052,10,1\n0.1,10,1\n0.149,10,1\n",
+        )
+        .unwrap();
+        let s = crate::input::read_series(&ok, "flow_lps", true).unwrap();
+        assert!((s.sample_period_s - 0.149 / 3.0).abs() < 1e-12);
+        let bad = dir.path().join("missing.csv");
+        std::fs::write(
+            &bad,
+            "t_s,torque_ref_pct,flow_lps\n0,10,1\n0.05,10,1\n0.15,10,1\n0.2,10,1\n",
+        )
+        .unwrap();
+        let e = crate::input::read_series(&bad, "flow_lps", true).unwrap_err();
+        assert_eq!(e.line, Some(4));
+    }
 }
