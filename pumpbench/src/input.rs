@@ -344,7 +344,7 @@ pub struct Series {
     pub torque_ref_pct: Vec<f64>,
     /// The output column, if the file has it.
     pub y: Option<Vec<f64>>,
-    /// Sample period read from `t_s` (mean spacing), s.
+    /// Sample period read from `t_s` (median spacing), s.
     pub sample_period_s: f64,
 }
 
@@ -366,11 +366,10 @@ pub fn read_series(path: &Path, y_column: &str, required: bool) -> Result<Series
         .as_ref()
         .map(|d| d.rows.iter().map(|r| r[1]).collect());
     let n = input.t_s.len();
-    let ts = if n > 1 {
-        (input.t_s[n - 1] - input.t_s[0]) / (n - 1) as f64
-    } else {
-        0.0
-    };
+    // The median step: one gap or extra sample does not move it.
+    let mut steps: Vec<f64> = input.t_s.windows(2).map(|p| p[1] - p[0]).collect();
+    steps.sort_by(f64::total_cmp);
+    let ts = steps.get(steps.len() / 2).copied().unwrap_or(0.0);
     let lines = read_columns(path, &["t_s"])?.lines;
     let mut worst: f64 = 0.0;
     for (pair, &line) in input.t_s.windows(2).zip(&lines[1..]) {
@@ -381,7 +380,9 @@ pub fn read_series(path: &Path, y_column: &str, required: bool) -> Result<Series
                 path: path.to_path_buf(),
                 line: Some(line),
                 column: None,
-                message: format!("not uniformly sampled: step {d} s where the mean step is {ts} s"),
+                message: format!(
+                    "not uniformly sampled: step {d} s where the median step is {ts} s"
+                ),
             });
         }
     }
