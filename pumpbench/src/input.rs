@@ -365,7 +365,6 @@ pub fn read_series(path: &Path, y_column: &str, required: bool) -> Result<Series
     let y = with_y
         .as_ref()
         .map(|d| d.rows.iter().map(|r| r[1]).collect());
-    let n = input.t_s.len();
     // The median step: one gap or extra sample does not move it.
     let mut steps: Vec<f64> = input.t_s.windows(2).map(|p| p[1] - p[0]).collect();
     steps.sort_by(f64::total_cmp);
