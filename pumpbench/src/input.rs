@@ -344,7 +344,7 @@ pub struct Series {
     pub torque_ref_pct: Vec<f64>,
     /// The output column, if the file has it.
     pub y: Option<Vec<f64>>,
-    /// Sample period read from `t_s` (median spacing), s.
+    /// Sample period read from `t_s` (mean spacing), s.
     pub sample_period_s: f64,
 }
 
@@ -365,10 +365,17 @@ pub fn read_series(path: &Path, y_column: &str, required: bool) -> Result<Series
     let y = with_y
         .as_ref()
         .map(|d| d.rows.iter().map(|r| r[1]).collect());
-    // The median step: one gap or extra sample does not move it.
+    // Gaps are judged against the median step (one gap or extra sample does not move it);
+    // the period reported is the mean step, span / (n − 1), equal to it for accepted data.
     let mut steps: Vec<f64> = input.t_s.windows(2).map(|p| p[1] - p[0]).collect();
     steps.sort_by(f64::total_cmp);
     let ts = steps.get(steps.len() / 2).copied().unwrap_or(0.0);
+    let n = input.t_s.len();
+    let mean_step = if n > 1 {
+        (input.t_s[n - 1] - input.t_s[0]) / (n - 1) as f64
+    } else {
+        0.0
+    };
     let lines = read_columns(path, &["t_s"])?.lines;
     let mut worst: f64 = 0.0;
     for (pair, &line) in input.t_s.windows(2).zip(&lines[1..]) {
@@ -396,6 +403,6 @@ pub fn read_series(path: &Path, y_column: &str, required: bool) -> Result<Series
         t_s: input.t_s,
         torque_ref_pct: input.torque_ref_pct,
         y,
-        sample_period_s: ts,
+        sample_period_s: mean_step,
     })
 }

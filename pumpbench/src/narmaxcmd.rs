@@ -413,7 +413,7 @@ mod tests {
         )
         .unwrap();
         let s = crate::input::read_series(&ok, "flow_lps", true).unwrap();
-        assert!((s.sample_period_s - 0.049).abs() < 1e-12, "median step");
+        assert!((s.sample_period_s - 0.149 / 3.0).abs() < 1e-12, "mean step");
         let bad = dir.path().join("missing.csv");
         std::fs::write(
             &bad,
