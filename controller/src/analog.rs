@@ -1,0 +1,286 @@
+//! 4-20 mA transmitter inputs: ADC code → loop current → engineering value, with NAMUR NE 43
+//! fault detection.
+//!
+//! NE 43 bands (loop current I):
+//! - 3.8 ≤ I ≤ 20.5 mA: a measurement (3.8..4 and 20..20.5 mA are under/over range, the value
+//!   is clamped to the span and flagged);
+//! - I < 3.6 mA (broken wire) or I > 21 mA (short): a **fault**, flagged on the sample that
+//!   shows it; the value is not used;
+//! - 3.6..3.8 and 20.5..21 mA: no fault is raised, but the value is clamped and flagged out of
+//!   range.
+//!
+//! A fault clears with hysteresis: only after [`LoopConfig::clear_samples`] consecutive samples
+//! inside the 3.8..20.5 mA band.
+
+/// Below this loop current (mA) the transmitter is faulty (NE 43: broken wire).
+pub const FAULT_LOW_MA: f32 = 3.6;
+/// Above this loop current (mA) the transmitter is faulty (NE 43: short circuit).
+pub const FAULT_HIGH_MA: f32 = 21.0;
+/// Lower end of the valid signal band (mA).
+pub const VALID_LOW_MA: f32 = 3.8;
+/// Upper end of the valid signal band (mA).
+pub const VALID_HIGH_MA: f32 = 20.5;
+
+/// One 4-20 mA input: the shunt and ADC that read it, and the transmitter's span.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LoopConfig {
+    /// Shunt resistor, Ω (> 0): the ADC reads I · R.
+    pub shunt_ohm: f32,
+    /// ADC reference voltage, V (> 0).
+    pub adc_ref_v: f32,
+    /// ADC resolution, bits (1..=16).
+    pub adc_bits: u8,
+    /// Engineering value at 4 mA (e.g. 0 mca).
+    pub value_at_4ma: f32,
+    /// Engineering value at 20 mA (e.g. 10 mca); may be below `value_at_4ma`.
+    pub value_at_20ma: f32,
+    /// Consecutive good samples that clear a fault (≥ 1).
+    pub clear_samples: u16,
+}
+
+impl LoopConfig {
+    /// A 150 Ω shunt on a 12-bit, 3.3 V ADC (full scale 22 mA), span `lo..hi`, faults clear
+    /// after 3 good samples.
+    pub const fn typical(value_at_4ma: f32, value_at_20ma: f32) -> Self {
+        Self {
+            shunt_ohm: 150.0,
+            adc_ref_v: 3.3,
+            adc_bits: 12,
+            value_at_4ma,
+            value_at_20ma,
+            clear_samples: 3,
+        }
+    }
+
+    /// `true` if every field is usable (finite, positive shunt and reference, 1..=16 bits,
+    /// a non-empty span, at least one clearing sample).
+    pub fn is_valid(&self) -> bool {
+        self.shunt_ohm.is_finite()
+            && self.shunt_ohm > 0.0
+            && self.adc_ref_v.is_finite()
+            && self.adc_ref_v > 0.0
+            && (1..=16).contains(&self.adc_bits)
+            && self.value_at_4ma.is_finite()
+            && self.value_at_20ma.is_finite()
+            && self.value_at_4ma != self.value_at_20ma
+            && self.clear_samples >= 1
+    }
+
+    /// Loop current (mA) for an ADC code (codes above full scale read as full scale).
+    pub fn current_ma(&self, code: u16) -> f32 {
+        let full = ((1u32 << self.adc_bits) - 1) as f32;
+        let code = (code as f32).min(full);
+        code / full * self.adc_ref_v / self.shunt_ohm * 1000.0
+    }
+
+    /// Engineering value for a loop current, clamped to the span (4..20 mA).
+    pub fn value(&self, current_ma: f32) -> f32 {
+        let i = current_ma.clamp(4.0, 20.0);
+        self.value_at_4ma + (i - 4.0) / 16.0 * (self.value_at_20ma - self.value_at_4ma)
+    }
+}
+
+/// The state of one input.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Status {
+    /// A measurement inside 4..20 mA.
+    #[default]
+    Ok,
+    /// A measurement outside 4..20 mA but not a fault: the value is clamped to the span.
+    OutOfRange,
+    /// NE 43 fault (or not yet cleared): the value must not be used.
+    Fault,
+}
+
+/// One sample of an input.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Reading {
+    /// Engineering value, clamped to the span; the last good value while in fault.
+    pub value: f32,
+    /// Loop current, mA.
+    pub current_ma: f32,
+    /// What the sample means.
+    pub status: Status,
+}
+
+/// A 4-20 mA input with its fault latch.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AnalogInput {
+    config: LoopConfig,
+    faulted: bool,
+    good_run: u16,
+    last_good: f32,
+}
+
+impl AnalogInput {
+    /// A new input; `None` if the configuration is not valid. Starts without a fault, the
+    /// last good value at the 4 mA value.
+    pub fn new(config: LoopConfig) -> Option<Self> {
+        config.is_valid().then_some(Self {
+            config,
+            faulted: false,
+            good_run: 0,
+            last_good: config.value_at_4ma,
+        })
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &LoopConfig {
+        &self.config
+    }
+
+    /// `true` while a fault is latched.
+    pub fn faulted(&self) -> bool {
+        self.faulted
+    }
+
+    /// Takes one ADC sample.
+    pub fn sample(&mut self, code: u16) -> Reading {
+        let i = self.config.current_ma(code);
+        let fault = !(FAULT_LOW_MA..=FAULT_HIGH_MA).contains(&i);
+        let valid = (VALID_LOW_MA..=VALID_HIGH_MA).contains(&i);
+        if fault {
+            self.faulted = true;
+            self.good_run = 0;
+        } else if self.faulted {
+            if valid {
+                self.good_run = self.good_run.saturating_add(1);
+                if self.good_run >= self.config.clear_samples {
+                    self.faulted = false;
+                }
+            } else {
+                self.good_run = 0;
+            }
+        }
+        if self.faulted {
+            return Reading {
+                value: self.last_good,
+                current_ma: i,
+                status: Status::Fault,
+            };
+        }
+        let value = self.config.value(i);
+        self.last_good = value;
+        // One ADC step of tolerance: 4.000 mA must not read as out of range at 3.9997 mA.
+        let lsb = self.config.current_ma(1);
+        Reading {
+            value,
+            current_ma: i,
+            status: if (4.0 - lsb..=20.0 + lsb).contains(&i) {
+                Status::Ok
+            } else {
+                Status::OutOfRange
+            },
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// ADC code for a loop current with the typical front end.
+    fn code(c: &LoopConfig, ma: f32) -> u16 {
+        let full = ((1u32 << c.adc_bits) - 1) as f32;
+        (ma / 1000.0 * c.shunt_ohm / c.adc_ref_v * full)
+            .round()
+            .min(full) as u16
+    }
+
+    #[test]
+    fn scales_within_a_code() {
+        let c = LoopConfig::typical(0.0, 10.0);
+        let mut a = AnalogInput::new(c).unwrap();
+        for (ma, expected) in [(4.0, 0.0), (12.0, 5.0), (20.0, 10.0)] {
+            let r = a.sample(code(&c, ma));
+            let lsb_value = c.current_ma(1) / 16.0 * 10.0;
+            assert!((r.value - expected).abs() <= lsb_value, "{ma} mA → {r:?}");
+            assert_eq!(r.status, Status::Ok);
+        }
+        // Inverted span (20 mA = the low end) works too.
+        let mut inv = AnalogInput::new(LoopConfig::typical(30.0, 0.0)).unwrap();
+        assert!((inv.sample(code(&c, 20.0)).value).abs() < 0.02);
+    }
+
+    #[test]
+    fn namur_bands() {
+        let c = LoopConfig::typical(0.0, 10.0);
+        let mut a = AnalogInput::new(c).unwrap();
+        let r = a.sample(code(&c, 3.9));
+        assert_eq!((r.status, r.value), (Status::OutOfRange, 0.0));
+        let r = a.sample(code(&c, 20.4));
+        assert_eq!((r.status, r.value), (Status::OutOfRange, 10.0));
+        // 3.7 mA: between the bands, no fault, clamped.
+        assert_eq!(a.sample(code(&c, 3.7)).status, Status::OutOfRange);
+        assert!(!a.faulted());
+    }
+
+    #[test]
+    fn fault_within_one_sample_and_clears_with_hysteresis() {
+        let c = LoopConfig::typical(0.0, 10.0);
+        let mut a = AnalogInput::new(c).unwrap();
+        let good = a.sample(code(&c, 12.0)).value;
+        for ma in [0.0, 3.5, 21.2, 30.0] {
+            let mut b = a;
+            let r = b.sample(code(&c, ma));
+            assert_eq!(r.status, Status::Fault, "{ma} mA");
+            assert_eq!(r.value, good, "keeps the last good value");
+        }
+        let r = a.sample(code(&c, 2.0));
+        assert_eq!(r.status, Status::Fault);
+        // Back between the bands (3.7 mA): still faulted, the run does not start.
+        assert_eq!(a.sample(code(&c, 3.7)).status, Status::Fault);
+        // Two good samples are not enough, the third clears.
+        assert_eq!(a.sample(code(&c, 8.0)).status, Status::Fault);
+        assert_eq!(a.sample(code(&c, 8.0)).status, Status::Fault);
+        let r = a.sample(code(&c, 8.0));
+        assert_eq!(r.status, Status::Ok);
+        assert!((r.value - 2.5).abs() < 0.01);
+        // A fault in the middle of a good run restarts it.
+        a.sample(code(&c, 25.0));
+        a.sample(code(&c, 8.0));
+        a.sample(code(&c, 25.0));
+        a.sample(code(&c, 8.0));
+        assert!(a.faulted());
+    }
+
+    #[test]
+    fn every_code_gives_a_finite_clamped_value() {
+        let c = LoopConfig::typical(-1.0, 4.0);
+        let mut a = AnalogInput::new(c).unwrap();
+        for code in 0..=u16::MAX {
+            let r = a.sample(code);
+            assert!(
+                r.value.is_finite() && (-1.0..=4.0).contains(&r.value),
+                "{code}: {r:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn bad_configurations_are_refused() {
+        let ok = LoopConfig::typical(0.0, 10.0);
+        for bad in [
+            LoopConfig {
+                shunt_ohm: 0.0,
+                ..ok
+            },
+            LoopConfig {
+                adc_ref_v: f32::NAN,
+                ..ok
+            },
+            LoopConfig { adc_bits: 0, ..ok },
+            LoopConfig { adc_bits: 17, ..ok },
+            LoopConfig {
+                value_at_20ma: 0.0,
+                ..ok
+            },
+            LoopConfig {
+                clear_samples: 0,
+                ..ok
+            },
+        ] {
+            assert!(AnalogInput::new(bad).is_none(), "{bad:?}");
+        }
+    }
+}
