@@ -1,0 +1,472 @@
+//! The SCADA side: a Modbus RTU slave with the controller's register map.
+//!
+//! | input register (FC 04) | meaning | unit |
+//! |---|---|---|
+//! | 0 | status bits: 0 running, 1 any alarm, 2 model extrapolating, 3 VFD link ok, 4 pressure transmitter fault, 5 flow transmitter fault | |
+//! | 1 | applied torque reference | 0.01 % |
+//! | 2 | measured pressure | 0.001 mca, signed |
+//! | 3 | measured flow | 0.01 l/s |
+//! | 4 | white-box predicted pressure | 0.001 mca, signed |
+//! | 5 | white-box predicted flow | 0.01 l/s |
+//! | 6 | white-box speed | 0.1 rpm |
+//! | 7 | NARMAX predicted pressure | 0.001 mca, signed |
+//! | 8 | NARMAX predicted flow | 0.01 l/s |
+//! | 9 | sample counter (wraps) | |
+//!
+//! | holding register (FC 03, 06, 16) | meaning | range |
+//! |---|---|---|
+//! | 0 | torque setpoint, 0.01 % | 0..=10000 |
+//! | 1 | mode: 0 stop, 1 manual setpoint, 2 built-in excitation profile | 0..=2 |
+//!
+//! Exceptions as the Modbus spec says: 01 illegal function (anything but 03, 04, 06, 16),
+//! 02 illegal data address (a range outside the map), 03 illegal data value (a quantity of 0 or
+//! above the limit, a byte count that does not match, a setpoint above 10000, an unknown mode).
+//! A write with any bad value changes nothing. Frames with a bad CRC, for another unit
+//! (broadcasts included), too short or too long get no answer and leave no state behind.
+//!
+//! `rmodbus` is the codec (parsing, responses, CRC); this module checks the RTU frame's exact
+//! length and CRC first, because rmodbus answers an unknown function without checking the CRC
+//! and ignores bytes after a valid frame.
+
+use rmodbus::server::{ModbusFrame, Read, Write};
+use rmodbus::{ErrorKind, ModbusProto};
+
+/// Input registers.
+pub const INPUT_REGISTERS: usize = 10;
+/// Holding registers.
+pub const HOLDING_REGISTERS: usize = 2;
+/// Largest torque setpoint, 0.01 %.
+pub const SETPOINT_MAX: u16 = 10_000;
+/// Longest RTU frame (Modbus: 256 bytes).
+pub const MAX_FRAME: usize = 256;
+/// A response buffer.
+pub type Response = heapless::Vec<u8, MAX_FRAME>;
+
+/// Operating mode (holding register 1).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Mode {
+    /// Torque reference 0.
+    #[default]
+    Stop = 0,
+    /// Torque reference = the setpoint.
+    Manual = 1,
+    /// The built-in excitation profile (the paper's pulses).
+    Profile = 2,
+}
+
+impl Mode {
+    fn from_register(v: u16) -> Option<Self> {
+        match v {
+            0 => Some(Mode::Stop),
+            1 => Some(Mode::Manual),
+            2 => Some(Mode::Profile),
+            _ => None,
+        }
+    }
+}
+
+/// Status bits of input register 0.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Status {
+    /// Bit 0: the drive is commanded to run.
+    pub running: bool,
+    /// Bit 1: any alarm.
+    pub any_alarm: bool,
+    /// Bit 2: a model runs outside its fitted/training range.
+    pub extrapolating: bool,
+    /// Bit 3: the VFD link answers.
+    pub vfd_link_ok: bool,
+    /// Bit 4: pressure transmitter fault (NAMUR NE 43).
+    pub pressure_fault: bool,
+    /// Bit 5: flow transmitter fault.
+    pub flow_fault: bool,
+}
+
+impl Status {
+    /// The register value.
+    pub fn bits(&self) -> u16 {
+        [
+            self.running,
+            self.any_alarm,
+            self.extrapolating,
+            self.vfd_link_ok,
+            self.pressure_fault,
+            self.flow_fault,
+        ]
+        .iter()
+        .enumerate()
+        .fold(0, |acc, (i, &b)| acc | (u16::from(b) << i))
+    }
+}
+
+/// What the controller publishes, in engineering units (converted and clamped here).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Published {
+    /// Status bits.
+    pub status: Status,
+    /// Applied torque reference, %.
+    pub torque_pct: f32,
+    /// Measured pressure, mca.
+    pub pressure_mca: f32,
+    /// Measured flow, l/s.
+    pub flow_lps: f32,
+    /// White-box predicted pressure, mca.
+    pub whitebox_pressure_mca: f32,
+    /// White-box predicted flow, l/s.
+    pub whitebox_flow_lps: f32,
+    /// White-box speed, rpm.
+    pub whitebox_speed_rpm: f32,
+    /// NARMAX predicted pressure, mca.
+    pub narmax_pressure_mca: f32,
+    /// NARMAX predicted flow, l/s.
+    pub narmax_flow_lps: f32,
+    /// Sample counter.
+    pub sample: u16,
+}
+
+/// `x · scale` rounded and clamped to 0..=u16::MAX; NaN gives 0.
+pub fn unsigned_register(x: f32, scale: f32) -> u16 {
+    let v = x * scale;
+    if v.is_nan() {
+        0
+    } else {
+        (v + 0.5).clamp(0.0, f32::from(u16::MAX)) as u16
+    }
+}
+
+/// `x · scale` rounded and clamped to i16, as the register's two's-complement bits; NaN
+/// gives 0.
+pub fn signed_register(x: f32, scale: f32) -> u16 {
+    let v = x * scale;
+    if v.is_nan() {
+        0
+    } else {
+        let r = if v < 0.0 { v - 0.5 } else { v + 0.5 };
+        r.clamp(f32::from(i16::MIN), f32::from(i16::MAX)) as i16 as u16
+    }
+}
+
+impl Published {
+    /// The input registers.
+    pub fn registers(&self) -> [u16; INPUT_REGISTERS] {
+        [
+            self.status.bits(),
+            unsigned_register(self.torque_pct, 100.0).min(SETPOINT_MAX),
+            signed_register(self.pressure_mca, 1000.0),
+            unsigned_register(self.flow_lps, 100.0),
+            signed_register(self.whitebox_pressure_mca, 1000.0),
+            unsigned_register(self.whitebox_flow_lps, 100.0),
+            unsigned_register(self.whitebox_speed_rpm, 10.0),
+            signed_register(self.narmax_pressure_mca, 1000.0),
+            unsigned_register(self.narmax_flow_lps, 100.0),
+            self.sample,
+        ]
+    }
+}
+
+/// CRC-16/MODBUS of `data`.
+pub fn crc16(data: &[u8]) -> u16 {
+    let mut crc = 0xFFFFu16;
+    for &b in data {
+        crc ^= u16::from(b);
+        for _ in 0..8 {
+            crc = if crc & 1 != 0 {
+                (crc >> 1) ^ 0xA001
+            } else {
+                crc >> 1
+            };
+        }
+    }
+    crc
+}
+
+/// The exact RTU length of a request (unit, function, body, CRC), or `None` when the frame
+/// does not say (too short to tell). Unknown functions have no fixed length: any CRC-valid
+/// frame of ≥ 4 bytes is taken as one.
+fn expected_len(frame: &[u8]) -> Option<usize> {
+    match *frame.get(1)? {
+        1..=6 => Some(8),
+        15 | 16 => frame.get(6).map(|&n| 9 + usize::from(n)),
+        _ => Some(frame.len()),
+    }
+}
+
+/// The slave: its unit address and holding registers; the input registers are handed in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ScadaSlave {
+    unit: u8,
+    /// Torque setpoint, 0.01 % (0..=10000).
+    pub setpoint: u16,
+    /// Mode.
+    pub mode: Mode,
+}
+
+impl ScadaSlave {
+    /// A slave at `unit` (1..=247), stopped, setpoint 0; `None` for another address.
+    pub fn new(unit: u8) -> Option<Self> {
+        (1..=247).contains(&unit).then_some(Self {
+            unit,
+            setpoint: 0,
+            mode: Mode::Stop,
+        })
+    }
+
+    /// The holding registers.
+    pub fn holding(&self) -> [u16; HOLDING_REGISTERS] {
+        [self.setpoint, self.mode as u16]
+    }
+
+    /// Handles one received RTU frame (the bytes between two silences). Returns the response
+    /// to send, or `None` for silence.
+    pub fn handle(
+        &mut self,
+        frame: &[u8],
+        inputs: &[u16; INPUT_REGISTERS],
+        response: &mut Response,
+    ) -> Option<usize> {
+        response.clear();
+        if frame.len() < 4 || frame.len() > MAX_FRAME || frame[0] != self.unit {
+            return None;
+        }
+        if expected_len(frame)? != frame.len() {
+            return None;
+        }
+        let n = frame.len();
+        if crc16(&frame[..n - 2]) != u16::from_le_bytes([frame[n - 2], frame[n - 1]]) {
+            return None;
+        }
+        let mut mf = ModbusFrame::new(self.unit, frame, ModbusProto::Rtu, response)
+            .with_broadcast_units(&[]);
+        mf.parse().ok()?;
+        if !mf.response_required {
+            return None;
+        }
+        if mf.processing_required {
+            let func = frame[1];
+            let result = match func {
+                3 | 4 if mf.count == 0 => Err(ErrorKind::IllegalDataValue),
+                16 if mf.count == 0 || usize::from(frame[6]) != 2 * usize::from(mf.count) => {
+                    Err(ErrorKind::IllegalDataValue)
+                }
+                3 | 4 => {
+                    let holding = self.holding();
+                    let table: &[u16] = if func == 4 { inputs } else { &holding };
+                    match mf.get_external_read() {
+                        Ok(Read::Words(r)) => read_words(table, r.address, r.count, r.buf),
+                        Ok(Read::Bits(_)) | Err(_) => Err(ErrorKind::IllegalFunction),
+                    }
+                }
+                6 | 16 => match mf.get_external_write() {
+                    Ok(Write::Words(w)) => self.write_words(w.address, w.count, w.data),
+                    Ok(Write::Bits(_)) | Err(_) => Err(ErrorKind::IllegalFunction),
+                },
+                _ => Err(ErrorKind::IllegalFunction),
+            };
+            let done = if func == 3 || func == 4 {
+                if result.is_err() {
+                    // Drop the partial read response: only the exception goes out.
+                    mf.response.clear();
+                }
+                mf.process_external_read(result)
+            } else {
+                mf.process_external_write(result)
+            };
+            done.ok()?;
+        }
+        mf.finalize_response().ok()?;
+        Some(response.len())
+    }
+
+    /// Applies a write of `count` registers at `address` (big-endian `data`), all or nothing.
+    fn write_words(&mut self, address: u16, count: u16, data: &[u8]) -> Result<(), ErrorKind> {
+        let end = usize::from(address) + usize::from(count);
+        if end > HOLDING_REGISTERS {
+            return Err(ErrorKind::IllegalDataAddress);
+        }
+        let mut next = *self;
+        for (k, word) in data.chunks_exact(2).take(usize::from(count)).enumerate() {
+            let v = u16::from_be_bytes([word[0], word[1]]);
+            match usize::from(address) + k {
+                0 if v <= SETPOINT_MAX => next.setpoint = v,
+                1 => next.mode = Mode::from_register(v).ok_or(ErrorKind::IllegalDataValue)?,
+                _ => return Err(ErrorKind::IllegalDataValue),
+            }
+        }
+        *self = next;
+        Ok(())
+    }
+}
+
+fn read_words(table: &[u16], address: u16, count: u16, buf: &mut [u8]) -> Result<(), ErrorKind> {
+    let start = usize::from(address);
+    let end = start + usize::from(count);
+    let words = table.get(start..end).ok_or(ErrorKind::IllegalDataAddress)?;
+    for (out, w) in buf.chunks_exact_mut(2).zip(words) {
+        out.copy_from_slice(&w.to_be_bytes());
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn frame(body: &[u8]) -> Vec<u8> {
+        let mut f = body.to_vec();
+        f.extend_from_slice(&crc16(body).to_le_bytes());
+        f
+    }
+
+    fn ask(s: &mut ScadaSlave, f: &[u8]) -> Option<Vec<u8>> {
+        let inputs: [u16; INPUT_REGISTERS] = core::array::from_fn(|i| 100 + i as u16);
+        let mut r = Response::new();
+        s.handle(f, &inputs, &mut r).map(|n| r[..n].to_vec())
+    }
+
+    fn exception(s: &mut ScadaSlave, body: &[u8]) -> u8 {
+        let r = ask(s, &frame(body)).expect("an answer");
+        assert_eq!(r.len(), 5, "{r:?}");
+        assert_eq!(r[1], body[1] | 0x80);
+        assert_eq!(crc16(&r[..3]).to_le_bytes(), [r[3], r[4]]);
+        r[2]
+    }
+
+    #[test]
+    fn crc_matches_the_spec_example() {
+        // Read holding registers 0x006B..0x006D of unit 0x11: CRC 0x8776 (bytes 76 87).
+        assert_eq!(crc16(&[0x11, 0x03, 0x00, 0x6B, 0x00, 0x03]), 0x8776);
+    }
+
+    #[test]
+    fn reads_and_writes() {
+        let mut s = ScadaSlave::new(1).unwrap();
+        let r = ask(&mut s, &frame(&[1, 4, 0, 0, 0, 10])).unwrap();
+        assert_eq!(&r[..3], &[1, 4, 20]);
+        assert_eq!(u16::from_be_bytes([r[3], r[4]]), 100);
+        assert_eq!(u16::from_be_bytes([r[21], r[22]]), 109);
+        // FC 06 setpoint 5000, FC 16 setpoint + mode, read back with FC 03.
+        let w = frame(&[1, 6, 0, 0, 0x13, 0x88]);
+        assert_eq!(ask(&mut s, &w).unwrap(), w, "FC 06 echoes the request");
+        assert_eq!(s.setpoint, 5000);
+        let r = ask(&mut s, &frame(&[1, 16, 0, 0, 0, 2, 4, 0x0F, 0xA0, 0, 1])).unwrap();
+        assert_eq!(&r[..6], &[1, 16, 0, 0, 0, 2]);
+        assert_eq!((s.setpoint, s.mode), (4000, Mode::Manual));
+        let r = ask(&mut s, &frame(&[1, 3, 0, 0, 0, 2])).unwrap();
+        assert_eq!(&r[..7], &[1, 3, 4, 0x0F, 0xA0, 0, 1]);
+    }
+
+    #[test]
+    fn spec_exceptions() {
+        let mut s = ScadaSlave::new(1).unwrap();
+        assert_eq!(
+            exception(&mut s, &[1, 1, 0, 0, 0, 1]),
+            1,
+            "coils: illegal function"
+        );
+        assert_eq!(
+            exception(&mut s, &[1, 0x2B, 0x0E, 1, 0]),
+            1,
+            "unknown function"
+        );
+        assert_eq!(
+            exception(&mut s, &[1, 4, 0, 9, 0, 2]),
+            2,
+            "past the input map"
+        );
+        assert_eq!(
+            exception(&mut s, &[1, 3, 0, 2, 0, 1]),
+            2,
+            "past the holding map"
+        );
+        assert_eq!(
+            exception(&mut s, &[1, 6, 0, 5, 0, 1]),
+            2,
+            "write past the map"
+        );
+        assert_eq!(exception(&mut s, &[1, 4, 0, 0, 0, 0]), 3, "zero quantity");
+        assert_eq!(
+            exception(&mut s, &[1, 4, 0, 0, 0, 126]),
+            3,
+            "quantity above 125"
+        );
+        assert_eq!(
+            exception(&mut s, &[1, 6, 0, 0, 0x27, 0x11]),
+            3,
+            "setpoint 10001"
+        );
+        assert_eq!(exception(&mut s, &[1, 6, 0, 1, 0, 3]), 3, "mode 3");
+        assert_eq!(
+            exception(&mut s, &[1, 16, 0, 0, 0, 2, 2, 0, 1]),
+            3,
+            "byte count"
+        );
+        // A write with one bad value changes nothing.
+        assert_eq!(exception(&mut s, &[1, 16, 0, 0, 0, 2, 4, 0, 100, 0, 9]), 3);
+        assert_eq!((s.setpoint, s.mode), (0, Mode::Stop));
+    }
+
+    /// Regression set of malformed frames: silence, no state change, and the next valid
+    /// request is answered.
+    #[test]
+    fn malformed_frames_get_silence_and_do_not_disturb() {
+        let mut s = ScadaSlave::new(1).unwrap();
+        let good = frame(&[1, 6, 0, 0, 0, 7]);
+        let mut bad_crc = good.clone();
+        bad_crc[7] ^= 0xFF;
+        let mut long = good.clone();
+        long.push(0);
+        let mut unknown_bad_crc = frame(&[1, 0x2B, 0x0E, 1, 0]);
+        unknown_bad_crc[5] ^= 1;
+        let cases: Vec<Vec<u8>> = vec![
+            vec![],
+            vec![1],
+            vec![1, 6, 0],
+            good[..7].to_vec(),
+            bad_crc,
+            long,
+            unknown_bad_crc,
+            frame(&[2, 6, 0, 0, 0, 7]),
+            frame(&[0, 6, 0, 0, 0, 7]),
+            frame(&[1, 16, 0, 0, 0, 1, 2, 0]),
+            vec![0xFF; 300],
+        ];
+        for f in &cases {
+            assert_eq!(ask(&mut s, f), None, "{f:?}");
+            assert_eq!((s.setpoint, s.mode), (0, Mode::Stop), "{f:?}");
+        }
+        assert_eq!(ask(&mut s, &good).unwrap(), good);
+        assert_eq!(s.setpoint, 7);
+    }
+
+    #[test]
+    fn registers_are_scaled_clamped_and_finite() {
+        let p = Published {
+            status: Status {
+                running: true,
+                flow_fault: true,
+                ..Status::default()
+            },
+            torque_pct: 150.0,
+            pressure_mca: -0.25,
+            flow_lps: f32::NAN,
+            whitebox_pressure_mca: 1e9,
+            whitebox_flow_lps: -3.0,
+            whitebox_speed_rpm: 1629.14,
+            narmax_pressure_mca: 2.6604,
+            narmax_flow_lps: 15.776,
+            sample: 65535,
+        };
+        let r = p.registers();
+        assert_eq!(r[0], 0b10_0001);
+        assert_eq!(r[1], 10_000);
+        assert_eq!(r[2] as i16, -250);
+        assert_eq!(r[3], 0);
+        assert_eq!(r[4] as i16, i16::MAX);
+        assert_eq!(r[5], 0);
+        assert_eq!(r[6], 16291);
+        assert_eq!(r[7], 2660);
+        assert_eq!(r[8], 1578);
+        assert_eq!(r[9], 65535);
+        assert!(ScadaSlave::new(0).is_none() && ScadaSlave::new(248).is_none());
+    }
+}
