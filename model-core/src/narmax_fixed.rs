@@ -48,6 +48,17 @@ pub fn tanh_q15(x: I16F16) -> I1F15 {
     I1F15::from_bits(if bits < 0 { -y } else { y })
 }
 
+/// A scaled value in I16F16, saturating; NaN (which `fixed` would panic on) reads as 0, the
+/// scaled mean.
+#[inline]
+fn to_fixed(x: f32) -> I16F16 {
+    if x.is_nan() {
+        I16F16::ZERO
+    } else {
+        I16F16::saturating_from_num(x)
+    }
+}
+
 /// Rounds `acc · 2^-shift` (shift may be negative) and saturates to i32.
 #[inline]
 fn round_shift(acc: i64, shift: i32) -> i32 {
@@ -59,13 +70,23 @@ fn round_shift(acc: i64, shift: i32) -> i32 {
     v.clamp(i64::from(i32::MIN), i64::from(i32::MAX)) as i32
 }
 
-/// Mantissas in I1F15 and the exponent e with w = m · 2^e, for a block of weights.
-fn block<const L: usize>(w: &[f64], out: &mut [I1F15; L]) -> i8 {
+/// Largest weight exponent: |w| < 2^30.
+pub const MAX_WEIGHT_EXP: i32 = 30;
+
+/// Mantissas in I1F15 and the exponent e with w = m · 2^e, for a block of weights; `None` if a
+/// weight is 2^30 or larger (or not finite).
+fn block<const L: usize>(w: &[f64], out: &mut [I1F15; L]) -> Option<i8> {
+    if w.iter().any(|x| !x.is_finite()) {
+        return None;
+    }
     let max = w.iter().fold(0.0f64, |m, &x| m.max(x.abs()));
     let full = 32767.0 / 32768.0;
+    if !(max < libm::ldexp(full, MAX_WEIGHT_EXP)) {
+        return None;
+    }
     let mut e: i32 = 0;
     if max > 0.0 {
-        while max > full * libm::ldexp(1.0, e) && e < 30 {
+        while max > full * libm::ldexp(1.0, e) && e < MAX_WEIGHT_EXP {
             e += 1;
         }
         while max <= full * libm::ldexp(1.0, e - 1) && e > -30 {
@@ -75,7 +96,7 @@ fn block<const L: usize>(w: &[f64], out: &mut [I1F15; L]) -> i8 {
     for (o, &x) in out.iter_mut().zip(w) {
         *o = I1F15::saturating_from_num(libm::ldexp(x, -e));
     }
-    e as i8
+    Some(e as i8)
 }
 
 /// Largest step between successive outputs, in I16F16 LSBs, that still counts as settled.
@@ -131,7 +152,7 @@ impl<const N: usize, const H: usize> NarmaxQ<N, H> {
             for (r, w) in row[..n].iter_mut().zip(&m.w1[j][..n]) {
                 *r = w.to_f64();
             }
-            q.w1_exp[j] = block(&row[..n], &mut q.w1[j]);
+            q.w1_exp[j] = block(&row[..n], &mut q.w1[j]).ok_or(NarmaxError::BadValue)?;
             let b = m.b1[j].to_f64();
             if !fits(b) {
                 return Err(NarmaxError::BadValue);
@@ -142,7 +163,7 @@ impl<const N: usize, const H: usize> NarmaxQ<N, H> {
         for (o, w) in w2[..m.hidden].iter_mut().zip(&m.w2[..m.hidden]) {
             *o = w.to_f64();
         }
-        q.w2_exp = block(&w2[..m.hidden], &mut q.w2);
+        q.w2_exp = block(&w2[..m.hidden], &mut q.w2).ok_or(NarmaxError::BadValue)?;
         if !fits(m.b2.to_f64()) {
             return Err(NarmaxError::BadValue);
         }
@@ -199,11 +220,11 @@ impl<const N: usize, const H: usize> NarmaxQ<N, H> {
     }
 
     fn scale_u(&self, u: f32) -> I16F16 {
-        I16F16::saturating_from_num(self.u_scale.scale(u))
+        to_fixed(self.u_scale.scale(u))
     }
 
     fn scale_y(&self, y: f32) -> I16F16 {
-        I16F16::saturating_from_num(self.y_scale.scale(y))
+        to_fixed(self.y_scale.scale(y))
     }
 
     /// Puts one measured sample into the history without predicting.
@@ -305,14 +326,50 @@ mod tests {
     }
 
     #[test]
+    fn non_finite_inputs_never_panic() {
+        use crate::narmax::{Lags, Narmax, Scaling};
+        let lags = Lags {
+            na: 1,
+            nb: 1,
+            nc: 1,
+            nk: 1,
+        };
+        let unit = Scaling {
+            mean: 1.0f32,
+            std: 2.0,
+        };
+        let m: Narmax<f32, 4, 2> = Narmax::new(
+            lags,
+            2,
+            &[0.5; 8],
+            &[0.3; 3],
+            unit,
+            unit,
+            [0.0, 9.0],
+            [0.0, 9.0],
+        )
+        .unwrap();
+        let q: NarmaxQ<4, 2> = NarmaxQ::quantize(&m).unwrap();
+        let mut st = q.state_at(f32::NAN, f32::INFINITY);
+        for u in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY, 1e30, -1e30, 3.0] {
+            assert!(q.simulate_step(&mut st, u).y.is_finite());
+            assert!(q.predict_step(&mut st, u, f32::NAN).y.is_finite());
+        }
+    }
+
+    #[test]
     fn block_exponents_use_the_full_mantissa() {
         let mut out = [I1F15::ZERO; 3];
         let e = block(&[0.3, -5.0, 2.0], &mut out);
-        assert_eq!(e, 3);
+        assert_eq!(e, Some(3));
         assert!((out[1].to_num::<f64>() * 8.0 + 5.0).abs() < 1e-3);
         let e = block(&[0.01, 0.002], &mut out);
-        assert_eq!(e, -6);
-        assert_eq!(block(&[0.0, 0.0], &mut out), 0);
+        assert_eq!(e, Some(-6));
+        assert_eq!(block(&[0.0, 0.0], &mut out), Some(0));
+        assert_eq!(block(&[1e10, 0.0], &mut out), None);
+        assert_eq!(block(&[f64::NAN], &mut out), None);
+        assert_eq!(to_fixed(f32::NAN), I16F16::ZERO);
+        assert_eq!(to_fixed(f32::INFINITY), I16F16::MAX);
         assert_eq!(round_shift(3, 1), 2);
         assert_eq!(round_shift(-3, 1), -1);
         assert_eq!(round_shift(i64::MAX / 2, 0), i32::MAX);

@@ -348,13 +348,13 @@ pub struct Series {
     pub sample_period_s: f64,
 }
 
-/// Largest deviation of one time step from the mean step accepted as sampling jitter
-/// (a larger one means missing or extra samples); above 1 % a warning is printed.
+/// Largest deviation of one time step from the median step accepted as sampling jitter (a
+/// larger one means missing or extra samples).
 pub const MAX_JITTER: f64 = 0.1;
 
 /// Reads `t_s,torque_ref_pct` and, if present (or required), the column `y_column`; checks
-/// that times are strictly increasing and uniformly spaced (every step within 10 % of the mean
-/// step; a warning on stderr above 1 %).
+/// that times are strictly increasing and uniformly spaced (every step within 10 % of the
+/// median step).
 pub fn read_series(path: &Path, y_column: &str, required: bool) -> Result<Series, InputError> {
     let input = read_torque_input(path)?;
     let with_y = match read_columns(path, &["t_s", y_column]) {
@@ -377,10 +377,8 @@ pub fn read_series(path: &Path, y_column: &str, required: bool) -> Result<Series
         0.0
     };
     let lines = read_columns(path, &["t_s"])?.lines;
-    let mut worst: f64 = 0.0;
     for (pair, &line) in input.t_s.windows(2).zip(&lines[1..]) {
         let d = pair[1] - pair[0];
-        worst = worst.max((d - ts).abs() / ts);
         if (d - ts).abs() > MAX_JITTER * ts {
             return Err(InputError {
                 path: path.to_path_buf(),
@@ -391,13 +389,6 @@ pub fn read_series(path: &Path, y_column: &str, required: bool) -> Result<Series
                 ),
             });
         }
-    }
-    if worst > 0.01 {
-        eprintln!(
-            "pumpbench: {}: sampling jitter up to {:.1} % of the {ts} s period; treated as uniform",
-            path.display(),
-            100.0 * worst
-        );
     }
     Ok(Series {
         t_s: input.t_s,

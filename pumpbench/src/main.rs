@@ -162,9 +162,9 @@ enum Command {
         /// Seed of the initial weights.
         #[arg(long, default_value_t = 1)]
         seed: u64,
-        /// Starts probed: this many seeded weight sets (seed, seed+1, …) are each trained
-        /// for 5 LM epochs and the one with the lowest training criterion continues to
-        /// --epochs (its 5 count among them). 1 = NNSYSID's single random start.
+        /// Seeded random starts (seed, seed+1, …): up to 4 are each trained to --epochs in
+        /// parallel and the lowest final training criterion wins (more: all train 10 epochs
+        /// first and the best 4 continue). 1 = NNSYSID's single random start.
         #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u64).range(1..=64))]
         starts: u64,
         /// Model file to write.

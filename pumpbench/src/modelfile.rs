@@ -173,7 +173,37 @@ impl ModelFile {
         if !(m.sample_period_s.is_finite() && m.sample_period_s > 0.0) {
             return Err(bad(path, "sample_period_s must be > 0".into()));
         }
-        m.build::<f64>().map_err(|e| bad(path, e))?;
+        // Every value must survive the firmware's arithmetic: f32, and the fixed-point form.
+        let scalars = [
+            m.u_scaling.mean,
+            m.u_scaling.std,
+            m.y_scaling.mean,
+            m.y_scaling.std,
+            m.u_range[0],
+            m.u_range[1],
+            m.y_range[0],
+            m.y_range[1],
+        ];
+        if let Some(x) =
+            m.w1.iter()
+                .flatten()
+                .chain(&m.w2)
+                .chain(&scalars)
+                .find(|x| !(x.abs() <= f64::from(f32::MAX) / 1e6))
+        {
+            return Err(bad(
+                path,
+                format!("value {x:e} is out of range for the firmware's f32 arithmetic"),
+            ));
+        }
+        m.build::<f32>().map_err(|e| bad(path, e))?;
+        let f64_model = m.build::<f64>().map_err(|e| bad(path, e))?;
+        HostNarmaxQ::quantize(&f64_model).map_err(|e| {
+            bad(
+                path,
+                format!("cannot be put in fixed point (a weight of 2^30 or more?): {e}"),
+            )
+        })?;
         Ok(m)
     }
 

@@ -181,7 +181,7 @@ pub fn write_model(path: &Path, model: &ModelFile) -> Result<(), Failure> {
 /// Reads a data file for a model and checks its sample period against the model's.
 pub fn read_for_model(m: &ModelFile, path: &Path, need_y: bool) -> Result<Series, Failure> {
     let s = read_series(path, m.target.column(), need_y)?;
-    if s.t_s.len() > 1 && (s.sample_period_s / m.sample_period_s - 1.0).abs() > 1e-3 {
+    if s.t_s.len() > 1 && (s.sample_period_s / m.sample_period_s - 1.0).abs() > 1e-2 {
         return Err(usage(format!(
             "{}: sampled every {} s but the model was identified at {} s",
             path.display(),
@@ -203,8 +203,8 @@ pub trait HostModel {
     fn start(&self, u: f64, y: f64) -> Self::State;
     /// Pushes a measured sample.
     fn seed(&self, st: &mut Self::State, u: f64, y: f64);
-    /// One free-run step.
-    fn step(&self, st: &mut Self::State, u: f64) -> f64;
+    /// One free-run step: the output and whether a regressor was clamped to the training range.
+    fn step(&self, st: &mut Self::State, u: f64) -> (f64, bool);
     /// Settled free-run output under constant u.
     fn steady(&self, u: f64) -> Option<f64>;
 }
@@ -220,8 +220,9 @@ impl<T: Real> HostModel for HostNarmax<T> {
     fn seed(&self, st: &mut Self::State, u: f64, y: f64) {
         HostNarmax::seed(self, st, T::from_f64(u), T::from_f64(y));
     }
-    fn step(&self, st: &mut Self::State, u: f64) -> f64 {
-        self.simulate_step(st, T::from_f64(u)).y.to_f64()
+    fn step(&self, st: &mut Self::State, u: f64) -> (f64, bool) {
+        let o = self.simulate_step(st, T::from_f64(u));
+        (o.y.to_f64(), o.clamped)
     }
     fn steady(&self, u: f64) -> Option<f64> {
         // 1e-7 of the output's spread, or 64 ulps of the output's scale in T.
@@ -244,8 +245,9 @@ impl HostModel for HostNarmaxQ {
     fn seed(&self, st: &mut Self::State, u: f64, y: f64) {
         HostNarmaxQ::seed(self, st, u as f32, y as f32);
     }
-    fn step(&self, st: &mut Self::State, u: f64) -> f64 {
-        f64::from(self.simulate_step(st, u as f32).y)
+    fn step(&self, st: &mut Self::State, u: f64) -> (f64, bool) {
+        let o = self.simulate_step(st, u as f32);
+        (f64::from(o.y), o.clamped)
     }
     fn steady(&self, u: f64) -> Option<f64> {
         self.steady_output(u as f32, 200_000).map(f64::from)
@@ -274,8 +276,17 @@ pub fn free_run<M: HostModel>(m: &M, series: &Series) -> Result<Vec<f64>, Failur
             st = m.start(u[0], y0);
         }
     }
+    let mut clamped = 0usize;
     for &uk in &u[start..] {
-        out.push(m.step(&mut st, uk));
+        let (y, c) = m.step(&mut st, uk);
+        out.push(y);
+        clamped += usize::from(c);
+    }
+    if clamped > 0 {
+        eprintln!(
+            "pumpbench: {clamped} of {} free-run samples had regressors outside the training range (clamped)",
+            u.len() - start
+        );
     }
     Ok(out)
 }
@@ -317,6 +328,19 @@ pub fn steady<M: HostModel>(
     w: &mut dyn Write,
 ) -> Result<(), Failure> {
     writeln!(w, "torque_ref_pct,{}", m.target.column()).map_err(io)?;
+    let outside: Vec<String> = torques
+        .iter()
+        .filter(|&&u| u < m.u_range[0] || u > m.u_range[1])
+        .map(|u| u.to_string())
+        .collect();
+    if !outside.is_empty() {
+        eprintln!(
+            "pumpbench: torque {} % outside the training range {}..{} %: the input is clamped to it",
+            outside.join(", "),
+            m.u_range[0],
+            m.u_range[1]
+        );
+    }
     for &u in torques {
         let y = steady_of(model, u)?;
         writeln!(w, "{u},{y}").map_err(io)?;
@@ -366,8 +390,19 @@ pub fn validate<M: HostModel>(
         .y
         .as_ref()
         .ok_or_else(|| usage("validation data needs the target column".into()))?;
-    let sim = free_run(model, series)?;
     let skip = m.lags().max_lag();
+    if y.len() <= skip {
+        return Err(usage(format!(
+            "the validation record has {} rows; the model needs more than its {skip} seed rows",
+            y.len()
+        )));
+    }
+    if y[skip..].iter().all(|&v| v == 0.0) {
+        return Err(usage(
+            "every measurement after the seed rows is 0: MAPE is undefined".into(),
+        ));
+    }
+    let sim = free_run(model, series)?;
     let mape_d_pct = mape_pct(&y[skip..], &sim[skip..]);
     let zeros = zero_measurements(&y[skip..]);
     if zeros > 0 {
@@ -377,11 +412,20 @@ pub fn validate<M: HostModel>(
         None => None,
         Some(points) => {
             let ys: Vec<f64> = points.iter().map(|p| p.1).collect();
+            let zeros = zero_measurements(&ys);
+            if zeros == ys.len() {
+                return Err(usage(
+                    "every steady-state measurement is 0: MAPE_s is undefined".into(),
+                ));
+            }
+            if zeros > 0 {
+                eprintln!("validate: {zeros} steady-state points with a measurement of 0 left out of MAPE_s");
+            }
             let mut model_ys = Vec::with_capacity(ys.len());
             for &(u, _) in points {
                 model_ys.push(steady_of(model, u)?);
             }
-            Some((ys.len(), mape_pct(&ys, &model_ys)))
+            Some((ys.len() - zeros, mape_pct(&ys, &model_ys)))
         }
     };
     Ok(Validation {

@@ -197,12 +197,14 @@ pub struct Trained {
     pub stop: &'static str,
 }
 
-/// NNSYSID's LM loop from `w0` for at most `epochs` accepted steps.
+/// NNSYSID's LM loop from `w0` for at most `epochs` accepted steps, starting at `lambda0`
+/// (NNSYSID: 1).
 pub fn marquardt(
     s: &Structure,
     w0: Weights,
     d: &Data,
     epochs: usize,
+    lambda0: f64,
     mut progress: impl FnMut(Epoch),
 ) -> Trained {
     const CRITTERM: f64 = 1e-7;
@@ -211,7 +213,7 @@ pub fn marquardt(
     let mut theta = w0.theta();
     let p = theta.len();
     let mut w = w0;
-    let mut lambda = 1.0;
+    let mut lambda = lambda0;
     let mut first = pass(s, &w, d, true);
     let n = first.e.len() as f64;
     let mut pi = first.e.iter().map(|x| x * x).sum::<f64>() / (2.0 * n);
@@ -288,51 +290,23 @@ pub fn marquardt(
     }
 }
 
-/// Accepted epochs each extra start is probed for before the best one continues.
-pub const PROBE_EPOCHS: usize = 5;
+/// Accepted epochs of the first selection round.
+pub const ROUND_EPOCHS: usize = 10;
 
-/// Picks the start: `starts` seeded random weight sets (seeds `seed`, `seed + 1`, …) each
-/// trained for [`PROBE_EPOCHS`] accepted steps; the one with the lowest **training** criterion
-/// is returned with its probe epochs (it keeps them: they count among its epochs).
-fn best_start(s: &Structure, d: &Data, seed: u64, starts: usize, epochs: usize) -> Trained {
-    let probe = PROBE_EPOCHS.min(epochs);
-    (0..starts.max(1) as u64)
-        .map(|k| {
-            let mut rng = SplitMix64::new(seed.wrapping_add(k));
-            marquardt(s, Weights::random(s, &mut rng), d, probe, |_| {})
-        })
-        .min_by(|a, b| {
-            let (ca, cb) = (a.criterion.last(), b.criterion.last());
-            ca.partial_cmp(&cb).unwrap_or(core::cmp::Ordering::Equal)
-        })
-        .unwrap_or_else(|| {
-            marquardt(
-                s,
-                Weights::random(s, &mut SplitMix64::new(seed)),
-                d,
-                0,
-                |_| {},
-            )
-        })
-}
-
-/// Continues `t` for the epochs left of `epochs`, keeping its history.
-fn resume(
+/// Continues `t` to `target` accepted epochs in all (no-op if it has them or has stopped).
+fn continue_to(
     s: &Structure,
     d: &Data,
     t: Trained,
-    epochs: usize,
-    mut progress: impl FnMut(Epoch),
+    target: usize,
+    progress: impl FnMut(Epoch),
 ) -> Trained {
     let done = t.criterion.len() - 1;
-    for (i, &c) in t.criterion.iter().enumerate().skip(1) {
-        progress(Epoch {
-            epoch: i,
-            criterion: c,
-            lambda: t.lambda,
-        });
+    if done >= target || t.stop != "epochs" && done > 0 {
+        return t;
     }
-    let more = marquardt(s, t.weights, d, epochs.saturating_sub(done), |e| {
+    let mut progress = progress;
+    let more = marquardt(s, t.weights, d, target - done, t.lambda, |e| {
         progress(Epoch {
             epoch: e.epoch + done,
             ..e
@@ -343,9 +317,88 @@ fn resume(
     Trained { criterion, ..more }
 }
 
-/// Trains a network from seeded random weights (the best of `starts` probed starts, see
-/// [`best_start`]); with nc > 0 as `nnarmax2`: NARX first (at most 100 epochs), then the ε
-/// columns added with small random weights.
+fn final_criterion(t: &Trained) -> f64 {
+    t.criterion.last().copied().unwrap_or(f64::INFINITY)
+}
+
+/// Candidates trained to the full epochs (in parallel); with more starts than this, a first
+/// round of [`ROUND_EPOCHS`] picks them.
+pub const FINALISTS: usize = 4;
+
+/// Trains `pool` in parallel, each to `target` accepted epochs.
+fn train_all(s: &Structure, d: &Data, pool: Vec<Trained>, target: usize) -> Vec<Trained> {
+    std::thread::scope(|scope| {
+        let handles: Vec<_> = pool
+            .into_iter()
+            .map(|t| scope.spawn(move || continue_to(s, d, fresh(s, d, t), target, |_| {})))
+            .collect();
+        handles.into_iter().filter_map(|h| h.join().ok()).collect()
+    })
+}
+
+/// Trains from `starts` seeded random weight sets (seeds `seed`, `seed + 1`, …), choosing on
+/// the **training** criterion only: all train [`ROUND_EPOCHS`] accepted epochs (in parallel),
+/// the best [`FINALISTS`] continue to `epochs` (in parallel), and the lowest final criterion
+/// wins. λ carries over between rounds, so each network's LM run is one continuous NNSYSID
+/// run; `starts = 1` is NNSYSID's single random start. The progress of the winner is reported
+/// when it is known.
+fn select_and_train(
+    s: &Structure,
+    d: &Data,
+    seed: u64,
+    starts: usize,
+    epochs: usize,
+    mut progress: impl FnMut(Epoch),
+) -> Trained {
+    let pool: Vec<Trained> = (0..starts.max(1) as u64)
+        .map(|k| Trained {
+            weights: Weights::random(s, &mut SplitMix64::new(seed.wrapping_add(k))),
+            criterion: vec![f64::INFINITY],
+            lambda: 1.0,
+            stop: "epochs",
+        })
+        .collect();
+    let mut pool = if pool.len() > FINALISTS {
+        let mut first = train_all(s, d, pool, ROUND_EPOCHS.min(epochs));
+        first.sort_by(|a, b| final_criterion(a).total_cmp(&final_criterion(b)));
+        first.truncate(FINALISTS);
+        first
+    } else {
+        pool
+    };
+    pool = train_all(s, d, pool, epochs);
+    pool.sort_by(|a, b| final_criterion(a).total_cmp(&final_criterion(b)));
+    let Some(best) = pool.into_iter().next() else {
+        return marquardt(
+            s,
+            Weights::random(s, &mut SplitMix64::new(seed)),
+            d,
+            epochs,
+            1.0,
+            progress,
+        );
+    };
+    for (i, &c) in best.criterion.iter().enumerate().skip(1) {
+        progress(Epoch {
+            epoch: i,
+            criterion: c,
+            lambda: best.lambda,
+        });
+    }
+    best
+}
+
+/// A start that has not trained yet gets its initial criterion (one LM call with 0 epochs).
+fn fresh(s: &Structure, d: &Data, t: Trained) -> Trained {
+    if t.criterion.len() == 1 && t.criterion[0].is_infinite() {
+        marquardt(s, t.weights, d, 0, t.lambda, |_| {})
+    } else {
+        t
+    }
+}
+
+/// Trains a network (see [`select_and_train`]); with nc > 0 as `nnarmax2`: NARX first (at
+/// most 100 epochs), then the ε columns added with small random weights and LM from λ = 1.
 pub fn identify(
     s: &Structure,
     d: &Data,
@@ -355,18 +408,11 @@ pub fn identify(
     progress: impl FnMut(Epoch),
 ) -> Trained {
     if s.nc == 0 {
-        let start = best_start(s, d, seed, starts, epochs);
-        return resume(s, d, start, epochs, progress);
+        return select_and_train(s, d, seed, starts, epochs, progress);
     }
     let mut rng = SplitMix64::new(seed.wrapping_add(starts as u64));
     let narx = Structure { nc: 0, ..*s };
-    let start = resume(
-        &narx,
-        d,
-        best_start(&narx, d, seed, starts, 100),
-        100,
-        |_| {},
-    );
+    let start = select_and_train(&narx, d, seed, starts, 100, |_| {});
     let nab = s.na + s.nb;
     let mut w1 = Vec::with_capacity(s.hidden * (s.inputs() + 1));
     for j in 0..s.hidden {
@@ -379,7 +425,7 @@ pub fn identify(
         w1,
         w2: start.weights.w2,
     };
-    marquardt(s, w0, d, epochs, progress)
+    marquardt(s, w0, d, epochs, 1.0, progress)
 }
 
 #[cfg(test)]
