@@ -74,7 +74,7 @@ pub struct Training {
     pub epochs_done: usize,
     /// Seed of the initial weights.
     pub seed: u64,
-    /// Seeded starts probed; the best (training criterion) was kept.
+    /// Seeded starts trained; the lowest final training criterion was kept.
     pub starts: usize,
     /// Criterion SSE/(2N), scaled units, before training and after each epoch.
     pub criterion: Vec<f64>,

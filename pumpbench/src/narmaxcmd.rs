@@ -51,7 +51,7 @@ pub struct Identify<'a> {
     pub epochs: usize,
     /// Seed of the initial weights.
     pub seed: u64,
-    /// Seeded starts probed (the best training criterion continues).
+    /// Seeded starts (the lowest final training criterion wins).
     pub starts: usize,
 }
 

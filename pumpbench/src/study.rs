@@ -34,7 +34,7 @@ pub const FLOW_STRUCTURE: Structure = Structure {
 pub const EPOCHS: usize = 40;
 /// Seed of the initial weights (as `identify`'s default).
 pub const SEED: u64 = 1;
-/// Seeded starts probed (as `identify`'s default).
+/// Seeded starts (as `identify`'s default).
 pub const STARTS: usize = 4;
 /// Largest RK4 step of the white-box simulation, s.
 const WHITEBOX_STEP_S: f64 = 1e-3;
