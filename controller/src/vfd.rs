@@ -1,0 +1,518 @@
+//! The VFD side: a Modbus RTU master, written sans-IO (it makes request frames and takes the
+//! bytes and times it is given), so the same code runs on the MCU and in host tests.
+//!
+//! Each cycle writes the torque reference (FC 06) and reads a block of holding registers
+//! (FC 03) holding actual speed, torque and status; the register map and scaling are
+//! configuration ([`VfdMap`]), since vendors differ (16384 or 10000 counts = 100 % torque).
+//! An exchange is a request and up to [`VfdMap::retries`] repeats, each with
+//! [`VfdMap::timeout_ms`]; [`VfdMap::fail_limit`] failed exchanges in a row raise the link
+//! alarm, and while it stands the torque reference written is the safe value, 0 %. The first
+//! successful exchange clears it.
+//!
+//! Requests come from `rmodbus`; responses are checked here, strictly (exact length, CRC,
+//! unit, function, byte count): rmodbus's client parser accepts length mismatches and its
+//! `parse_u16` underflows on a read response with a zero byte count.
+
+use crate::scada::{crc16, MAX_FRAME};
+use rmodbus::client::ModbusRequest;
+use rmodbus::ModbusProto;
+
+/// A request or response buffer.
+pub type Frame = heapless::Vec<u8, MAX_FRAME>;
+/// Largest read block, registers.
+pub const MAX_READ: u16 = 8;
+
+/// Register map and link settings of one VFD.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct VfdMap {
+    /// Modbus unit (1..=247).
+    pub unit: u8,
+    /// Holding register of the torque reference (FC 06).
+    pub torque_ref_register: u16,
+    /// Counts for 100 % torque (e.g. 16384 or 10000), > 0.
+    pub counts_per_100_pct: u16,
+    /// First holding register of the read block (FC 03).
+    pub read_start: u16,
+    /// Registers in the read block (1..=8).
+    pub read_count: u16,
+    /// Offset of actual speed in the block.
+    pub speed_offset: u16,
+    /// rpm per count of actual speed (signed register), finite.
+    pub rpm_per_count: f32,
+    /// Offset of actual torque in the block (signed, same scaling as the reference).
+    pub torque_offset: u16,
+    /// Offset of the status word in the block.
+    pub status_offset: u16,
+    /// Time to wait for an answer, ms (> 0).
+    pub timeout_ms: u32,
+    /// Repeats of a request before the exchange fails.
+    pub retries: u8,
+    /// Failed exchanges in a row that raise the link alarm (≥ 1).
+    pub fail_limit: u8,
+}
+
+impl VfdMap {
+    /// A drive with 16384 counts = 100 % torque: reference at 0x2000, speed (1 rpm/count),
+    /// torque and status at 0x2100..0x2102; 100 ms timeout, 2 retries, alarm after 3 failures.
+    pub const fn example_16384() -> Self {
+        Self {
+            unit: 1,
+            torque_ref_register: 0x2000,
+            counts_per_100_pct: 16384,
+            read_start: 0x2100,
+            read_count: 3,
+            speed_offset: 0,
+            rpm_per_count: 1.0,
+            torque_offset: 1,
+            status_offset: 2,
+            timeout_ms: 100,
+            retries: 2,
+            fail_limit: 3,
+        }
+    }
+
+    /// `true` if usable: unit 1..=247, counts > 0, block 1..=8 registers with every offset
+    /// inside it, finite rpm scale, timeout > 0, fail limit ≥ 1.
+    pub fn is_valid(&self) -> bool {
+        (1..=247).contains(&self.unit)
+            && self.counts_per_100_pct > 0
+            && (1..=MAX_READ).contains(&self.read_count)
+            && self.speed_offset < self.read_count
+            && self.torque_offset < self.read_count
+            && self.status_offset < self.read_count
+            && self.rpm_per_count.is_finite()
+            && self.timeout_ms > 0
+            && self.fail_limit >= 1
+    }
+
+    /// Torque reference counts for `pct` (NaN → 0, clamped to 0..=100 %).
+    pub fn torque_counts(&self, pct: f32) -> u16 {
+        let pct = if pct.is_nan() {
+            0.0
+        } else {
+            pct.clamp(0.0, 100.0)
+        };
+        (pct / 100.0 * f32::from(self.counts_per_100_pct) + 0.5) as u16
+    }
+}
+
+/// What the drive last reported.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct VfdReadings {
+    /// Actual speed, rpm.
+    pub speed_rpm: f32,
+    /// Actual torque, % of nominal.
+    pub torque_pct: f32,
+    /// Status word, as the vendor defines it.
+    pub status: u16,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Kind {
+    WriteTorque(u16),
+    Read,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Pending {
+    kind: Kind,
+    sent_ms: u32,
+    attempt: u8,
+}
+
+/// The master's state.
+#[derive(Debug, Clone, PartialEq)]
+pub struct VfdMaster {
+    map: VfdMap,
+    pending: Option<Pending>,
+    next_is_write: bool,
+    failures_in_row: u8,
+    alarm: bool,
+    readings: VfdReadings,
+    exchanges_ok: u32,
+}
+
+impl VfdMaster {
+    /// A master for `map`; `None` if the map is not valid. The link starts in alarm (nothing
+    /// has answered yet), so the first reference written is 0 %.
+    pub fn new(map: VfdMap) -> Option<Self> {
+        map.is_valid().then_some(Self {
+            map,
+            pending: None,
+            next_is_write: true,
+            failures_in_row: 0,
+            alarm: true,
+            readings: VfdReadings::default(),
+            exchanges_ok: 0,
+        })
+    }
+
+    /// `true` while the link alarm stands.
+    pub fn alarm(&self) -> bool {
+        self.alarm
+    }
+
+    /// What the drive last reported.
+    pub fn readings(&self) -> VfdReadings {
+        self.readings
+    }
+
+    /// Successful exchanges so far.
+    pub fn exchanges_ok(&self) -> u32 {
+        self.exchanges_ok
+    }
+
+    /// The torque reference that is written for a requested one: 0 % during the link alarm.
+    pub fn applied_torque_pct(&self, requested_pct: f32) -> f32 {
+        if self.alarm || requested_pct.is_nan() {
+            0.0
+        } else {
+            requested_pct.clamp(0.0, 100.0)
+        }
+    }
+
+    /// Handles time: an unanswered request past its timeout is repeated (the frame to send is
+    /// written to `out`) or, after the retries, the exchange fails. Call it every tick.
+    pub fn poll(&mut self, now_ms: u32, out: &mut Frame) -> Option<usize> {
+        out.clear();
+        let p = self.pending?;
+        if now_ms.wrapping_sub(p.sent_ms) < self.map.timeout_ms {
+            return None;
+        }
+        if p.attempt < self.map.retries {
+            self.pending = Some(Pending {
+                attempt: p.attempt + 1,
+                sent_ms: now_ms,
+                ..p
+            });
+            self.request(p.kind, out)
+        } else {
+            self.pending = None;
+            self.failed();
+            None
+        }
+    }
+
+    /// Starts the next exchange if none is under way: alternately the torque reference
+    /// (`requested_pct`, forced to 0 % during the alarm) and the read block. The frame to send
+    /// is written to `out`.
+    pub fn start(&mut self, now_ms: u32, requested_pct: f32, out: &mut Frame) -> Option<usize> {
+        out.clear();
+        if self.pending.is_some() {
+            return None;
+        }
+        let kind = if self.next_is_write {
+            Kind::WriteTorque(
+                self.map
+                    .torque_counts(self.applied_torque_pct(requested_pct)),
+            )
+        } else {
+            Kind::Read
+        };
+        self.next_is_write = !self.next_is_write;
+        self.pending = Some(Pending {
+            kind,
+            sent_ms: now_ms,
+            attempt: 0,
+        });
+        self.request(kind, out)
+    }
+
+    fn request(&self, kind: Kind, out: &mut Frame) -> Option<usize> {
+        let mut req = ModbusRequest::new(self.map.unit, ModbusProto::Rtu);
+        let made = match kind {
+            Kind::WriteTorque(counts) => {
+                req.generate_set_holding(self.map.torque_ref_register, counts, out)
+            }
+            Kind::Read => req.generate_get_holdings(self.map.read_start, self.map.read_count, out),
+        };
+        made.ok().map(|()| out.len())
+    }
+
+    fn failed(&mut self) {
+        self.failures_in_row = self.failures_in_row.saturating_add(1);
+        if self.failures_in_row >= self.map.fail_limit {
+            self.alarm = true;
+        }
+    }
+
+    /// Takes a received frame. A valid answer to the pending request completes the exchange
+    /// (and clears the alarm); an exception answer fails it; anything else (noise, another
+    /// unit, bad CRC, wrong length) is ignored and the request runs into its timeout.
+    pub fn receive(&mut self, frame: &[u8]) {
+        let Some(p) = self.pending else { return };
+        match self.check(p.kind, frame) {
+            Answer::Ignore => {}
+            Answer::Exception => {
+                self.pending = None;
+                self.failed();
+            }
+            Answer::Ok => {
+                self.pending = None;
+                self.failures_in_row = 0;
+                self.alarm = false;
+                self.exchanges_ok = self.exchanges_ok.wrapping_add(1);
+            }
+        }
+    }
+
+    fn check(&mut self, kind: Kind, f: &[u8]) -> Answer {
+        let n = f.len();
+        if n < 5
+            || f[0] != self.map.unit
+            || crc16(&f[..n - 2]) != u16::from_le_bytes([f[n - 2], f[n - 1]])
+        {
+            return Answer::Ignore;
+        }
+        let func = match kind {
+            Kind::WriteTorque(_) => 6,
+            Kind::Read => 3,
+        };
+        if f[1] == func | 0x80 {
+            return if n == 5 {
+                Answer::Exception
+            } else {
+                Answer::Ignore
+            };
+        }
+        if f[1] != func {
+            return Answer::Ignore;
+        }
+        match kind {
+            Kind::WriteTorque(counts) => {
+                let mut echo = [0u8; 6];
+                echo[0] = self.map.unit;
+                echo[1] = 6;
+                echo[2..4].copy_from_slice(&self.map.torque_ref_register.to_be_bytes());
+                echo[4..6].copy_from_slice(&counts.to_be_bytes());
+                if n == 8 && f[..6] == echo {
+                    Answer::Ok
+                } else {
+                    Answer::Ignore
+                }
+            }
+            Kind::Read => {
+                let bytes = 2 * usize::from(self.map.read_count);
+                if n != 5 + bytes || usize::from(f[2]) != bytes {
+                    return Answer::Ignore;
+                }
+                let word = |i: u16| {
+                    let at = 3 + 2 * usize::from(i);
+                    u16::from_be_bytes([f[at], f[at + 1]])
+                };
+                let m = &self.map;
+                self.readings = VfdReadings {
+                    speed_rpm: f32::from(word(m.speed_offset) as i16) * m.rpm_per_count,
+                    torque_pct: f32::from(word(m.torque_offset) as i16) * 100.0
+                        / f32::from(m.counts_per_100_pct),
+                    status: word(m.status_offset),
+                };
+                Answer::Ok
+            }
+        }
+    }
+}
+
+enum Answer {
+    Ok,
+    Exception,
+    Ignore,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn with_crc(body: &[u8]) -> Vec<u8> {
+        let mut f = body.to_vec();
+        f.extend_from_slice(&crc16(body).to_le_bytes());
+        f
+    }
+
+    /// A fake drive: holding registers from 0x2000 (reference) and 0x2100 (speed, torque,
+    /// status); answers FC 06 and FC 03 like a real one.
+    struct Drive {
+        reference: u16,
+        block: [u16; 3],
+    }
+
+    impl Drive {
+        fn answer(&mut self, req: &[u8]) -> Vec<u8> {
+            match req[1] {
+                6 => {
+                    self.reference = u16::from_be_bytes([req[4], req[5]]);
+                    req.to_vec()
+                }
+                3 => {
+                    let mut body = vec![req[0], 3, 6];
+                    for w in self.block {
+                        body.extend_from_slice(&w.to_be_bytes());
+                    }
+                    with_crc(&body)
+                }
+                _ => with_crc(&[req[0], req[1] | 0x80, 1]),
+            }
+        }
+    }
+
+    /// One full exchange answered by `drive`; returns the request sent.
+    fn exchange(m: &mut VfdMaster, d: &mut Drive, now: u32, pct: f32) -> Vec<u8> {
+        let mut out = Frame::new();
+        let n = m.start(now, pct, &mut out).expect("a request");
+        let req = out[..n].to_vec();
+        let ans = d.answer(&req);
+        m.receive(&ans);
+        req
+    }
+
+    #[test]
+    fn cycles_write_then_read_and_scale() {
+        let mut m = VfdMaster::new(VfdMap::example_16384()).unwrap();
+        let mut d = Drive {
+            reference: 999,
+            block: [1500, (-4096i16) as u16, 0x0037],
+        };
+        assert!(m.alarm(), "nothing answered yet");
+        exchange(&mut m, &mut d, 0, 50.0);
+        assert_eq!(d.reference, 0, "the first write is the safe value");
+        assert!(!m.alarm());
+        exchange(&mut m, &mut d, 10, 50.0);
+        assert_eq!(
+            m.readings(),
+            VfdReadings {
+                speed_rpm: 1500.0,
+                torque_pct: -25.0,
+                status: 0x37
+            }
+        );
+        exchange(&mut m, &mut d, 20, 50.0);
+        assert_eq!(d.reference, 8192);
+        let mut m10 = VfdMap::example_16384();
+        m10.counts_per_100_pct = 10_000;
+        assert_eq!(m10.torque_counts(50.0), 5000);
+        assert_eq!(m10.torque_counts(f32::NAN), 0);
+        assert_eq!(m10.torque_counts(150.0), 10_000);
+        assert_eq!(m.exchanges_ok(), 3);
+    }
+
+    #[test]
+    fn three_failed_exchanges_raise_the_alarm_and_force_zero() {
+        let mut m = VfdMaster::new(VfdMap::example_16384()).unwrap();
+        let mut d = Drive {
+            reference: 0,
+            block: [0; 3],
+        };
+        exchange(&mut m, &mut d, 0, 60.0);
+        exchange(&mut m, &mut d, 0, 60.0);
+        assert!(!m.alarm());
+        let mut out = Frame::new();
+        let mut now = 1000;
+        for failure in 1..=3 {
+            let first = m.start(now, 60.0, &mut out).unwrap();
+            let sent = out[..first].to_vec();
+            // Two retries, each after the timeout, resend the same frame.
+            for _ in 0..2 {
+                assert_eq!(m.poll(now + 99, &mut out), None, "not yet");
+                now += 100;
+                let n = m.poll(now, &mut out).expect("a retry");
+                assert_eq!(&out[..n], &sent[..]);
+            }
+            now += 100;
+            assert_eq!(m.poll(now, &mut out), None, "exchange {failure} failed");
+            assert_eq!(m.alarm(), failure >= 3);
+        }
+        assert_eq!(m.applied_torque_pct(60.0), 0.0);
+        // The next write carries the safe value; its answer brings the link back.
+        let write = loop {
+            let n = m.start(now, 60.0, &mut out).unwrap();
+            if out[1] == 6 {
+                break out[..n].to_vec();
+            }
+            for _ in 0..3 {
+                now += 100;
+                m.poll(now, &mut out);
+            }
+        };
+        assert_eq!(u16::from_be_bytes([write[4], write[5]]), 0);
+        m.receive(&d.answer(&write));
+        assert!(!m.alarm());
+        assert_eq!(m.applied_torque_pct(60.0), 60.0);
+    }
+
+    #[test]
+    fn exceptions_fail_the_exchange_and_junk_is_ignored() {
+        let mut m = VfdMaster::new(VfdMap::example_16384()).unwrap();
+        let mut d = Drive {
+            reference: 0,
+            block: [0; 3],
+        };
+        exchange(&mut m, &mut d, 0, 10.0); // link up
+        let mut out = Frame::new();
+        m.start(0, 10.0, &mut out).unwrap(); // a read is pending
+        let good = d.answer(&out);
+        let mut bad_crc = good.clone();
+        bad_crc[4] ^= 1;
+        let mut long = good.clone();
+        long.insert(5, 0);
+        let junk: Vec<Vec<u8>> = vec![
+            vec![],
+            vec![1, 3],
+            with_crc(&[1, 3, 0]), // empty payload: rmodbus's parser panics here
+            with_crc(&[1, 3, 2, 0, 1]), // byte count short of the block
+            with_crc(&[2, 3, 6, 0, 1, 0, 2, 0, 3]), // another unit
+            with_crc(&[1, 4, 6, 0, 1, 0, 2, 0, 3]), // another function
+            with_crc(&[1, 0x83, 2, 9]), // exception with extra bytes
+            bad_crc,
+            long,
+            vec![0xFF; 256],
+        ];
+        for f in &junk {
+            m.receive(f);
+            assert_eq!(m.exchanges_ok(), 1, "{f:?}");
+        }
+        m.receive(&good);
+        assert_eq!(m.exchanges_ok(), 2);
+        // An exception answer fails the exchange at once (no retries).
+        m.start(0, 10.0, &mut out).unwrap();
+        m.receive(&with_crc(&[1, 0x86, 4]));
+        assert_eq!(
+            m.start(0, 10.0, &mut out).map(|_| out[1]),
+            Some(3),
+            "next exchange starts"
+        );
+    }
+
+    #[test]
+    fn bad_maps_are_refused() {
+        let ok = VfdMap::example_16384();
+        for bad in [
+            VfdMap { unit: 0, ..ok },
+            VfdMap {
+                counts_per_100_pct: 0,
+                ..ok
+            },
+            VfdMap {
+                read_count: 9,
+                ..ok
+            },
+            VfdMap {
+                status_offset: 3,
+                ..ok
+            },
+            VfdMap {
+                rpm_per_count: f32::INFINITY,
+                ..ok
+            },
+            VfdMap {
+                timeout_ms: 0,
+                ..ok
+            },
+            VfdMap {
+                fail_limit: 0,
+                ..ok
+            },
+        ] {
+            assert!(VfdMaster::new(bad).is_none(), "{bad:?}");
+        }
+    }
+}
