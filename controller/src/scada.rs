@@ -26,7 +26,8 @@
 //!
 //! `rmodbus` is the codec (parsing, responses, CRC); this module checks the RTU frame's exact
 //! length and CRC first, because rmodbus answers an unknown function without checking the CRC
-//! and ignores bytes after a valid frame.
+//! and ignores bytes after a valid frame, and it drops function codes 128..=255 (the exception
+//! space), on which rmodbus 0.13 overflows.
 
 use rmodbus::server::{ModbusFrame, Read, Write};
 use rmodbus::{ErrorKind, ModbusProto};
@@ -225,7 +226,9 @@ impl ScadaSlave {
         response: &mut Response,
     ) -> Option<usize> {
         response.clear();
-        if frame.len() < 4 || frame.len() > MAX_FRAME || frame[0] != self.unit {
+        // Function codes 128..=255 are the exception space, never a request; rmodbus 0.13 would
+        // overflow on them (`responding_to_fn + 0x80`, found by tests/frames.rs).
+        if frame.len() < 4 || frame.len() > MAX_FRAME || frame[0] != self.unit || frame[1] >= 0x80 {
             return None;
         }
         if expected_len(frame)? != frame.len() {
@@ -418,6 +421,7 @@ mod tests {
         let mut unknown_bad_crc = frame(&[1, 0x2B, 0x0E, 1, 0]);
         unknown_bad_crc[5] ^= 1;
         let cases: Vec<Vec<u8>> = vec![
+            frame(&[1, 0x85, 0, 0, 0, 1]),
             vec![],
             vec![1],
             vec![1, 6, 0],
