@@ -3,8 +3,8 @@
 //! - `qemu`: build the firmware (release, thumbv7em-none-eabihf) and run it in QEMU
 //!   `netduinoplus2` with deterministic instruction counting (`-icount shift=0`).
 //! - `test`: everything CI checks: rustfmt, clippy `-D warnings` (host and firmware), the
-//!   host tests, the firmware build and its size, and the QEMU smoke run, whose samples must
-//!   equal bit for bit model-core's f32 bench replayed on the host.
+//!   no_std crates built for the MCU, the host tests, the firmware build and its size, and the
+//!   QEMU smoke run, whose samples must equal bit for bit model-core replayed on the host.
 //!
 //! Needs `qemu-system-arm` on the PATH for the QEMU steps (Debian: `qemu-system-arm`).
 
@@ -290,6 +290,18 @@ fn test() -> Result {
         "clippy (firmware)",
         cargo().args([
             "clippy", "-p", "firmware", "--target", TARGET, "--", "-D", "warnings",
+        ]),
+    )?;
+    run(
+        "no_std crates build for the MCU (model-core, controller)",
+        cargo().args([
+            "build",
+            "-p",
+            "model-core",
+            "-p",
+            "controller",
+            "--target",
+            TARGET,
         ]),
     )?;
     run("host tests", cargo().args(["test"]))?;
