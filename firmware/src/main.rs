@@ -64,6 +64,15 @@ struct Cost {
 }
 
 impl Cost {
+    /// Runs `f`, adding its SysTick ticks and one call.
+    fn time<R>(&mut self, f: impl FnOnce() -> R) -> R {
+        let t0 = cortex_m::peripheral::SYST::get_current();
+        let r = f();
+        self.ticks += ticks_since(t0);
+        self.calls += 1;
+        r
+    }
+
     fn per_call(&self) -> u64 {
         self.ticks / self.calls.max(1)
     }
@@ -111,24 +120,12 @@ fn run(out: &mut impl core::fmt::Write) -> Result<u32, core::fmt::Error> {
         }
         let torque_pct = torque as f32;
         if t_ms % PRESSURE_MS == 0 {
-            let t0 = cortex_m::peripheral::SYST::get_current();
-            p = p_f32.simulate_step(p_st, torque_pct).y;
-            c_p.ticks += ticks_since(t0);
-            let t0 = cortex_m::peripheral::SYST::get_current();
-            pq = p_q15.simulate_step(pq_st, torque_pct).y;
-            c_pq.ticks += ticks_since(t0);
-            c_p.calls += 1;
-            c_pq.calls += 1;
+            p = c_p.time(|| p_f32.simulate_step(p_st, torque_pct).y);
+            pq = c_pq.time(|| p_q15.simulate_step(pq_st, torque_pct).y);
         }
         if t_ms % FLOW_MS == 0 {
-            let t0 = cortex_m::peripheral::SYST::get_current();
-            f = f_f32.simulate_step(f_st, torque_pct).y;
-            c_f.ticks += ticks_since(t0);
-            let t0 = cortex_m::peripheral::SYST::get_current();
-            fq = f_q15.simulate_step(fq_st, torque_pct).y;
-            c_fq.ticks += ticks_since(t0);
-            c_f.calls += 1;
-            c_fq.calls += 1;
+            f = c_f.time(|| f_f32.simulate_step(f_st, torque_pct).y);
+            fq = c_fq.time(|| f_q15.simulate_step(fq_st, torque_pct).y);
         }
         if t_ms % PRINT_EVERY_MS == 0 {
             let s = bench.signals(st);
