@@ -1,12 +1,20 @@
 //! Board-independent logic of the bench controller: what runs on the MCU between the
 //! hardware and the models, written as plain `no_std` code and tested on the host.
 //!
-//! So far: the 4-20 mA inputs ([`analog`]), the SCADA Modbus RTU slave ([`scada`]) and the VFD
-//! Modbus RTU master ([`vfd`]); the alarms and the model loop follow.
+//! - [`analog`]: the 4-20 mA inputs with NAMUR NE 43 faults;
+//! - [`scada`]: the SCADA Modbus RTU slave and its register map;
+//! - [`vfd`]: the VFD Modbus RTU master; [`vfdsim`]: a simulated drive (its slave side);
+//! - [`rtu`]: RTU framing by silence;
+//! - [`app`]: the 1 ms loop that ties them to the white-box and NARMAX models;
+//! - [`bench`]: the virtual bench that stands in for the real one (QEMU, host tests).
 #![cfg_attr(not(test), no_std)]
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
 pub mod analog;
+pub mod app;
+pub mod bench;
+pub mod rtu;
 pub mod scada;
 pub mod vfd;
+pub mod vfdsim;

@@ -12,11 +12,20 @@
 //! | 7 | NARMAX predicted pressure | 0.001 mca, signed |
 //! | 8 | NARMAX predicted flow | 0.01 l/s |
 //! | 9 | sample counter (wraps) | |
+//! | 10 | white-box pressure residual (measured − predicted) | 0.001 mca, signed |
+//! | 11 | white-box flow residual | 0.01 l/s, signed |
+//! | 12 | NARMAX pressure residual | 0.001 mca, signed |
+//! | 13 | NARMAX flow residual | 0.01 l/s, signed |
+//! | 14 | VFD actual speed (read over the VFD link) | 0.1 rpm, signed |
+//! | 15 | VFD actual torque | 0.01 %, signed |
+//! | 16 | VFD status word (the vendor's bits) | |
+//! | 17 | uptime (wraps) | s |
 //!
 //! | holding register (FC 03, 06, 16) | meaning | range |
 //! |---|---|---|
 //! | 0 | torque setpoint, 0.01 % | 0..=10000 |
 //! | 1 | mode: 0 stop, 1 manual setpoint, 2 built-in excitation profile | 0..=2 |
+//! | 2 | NARMAX arithmetic: 0 f32, 1 fixed point | 0..=1 |
 //!
 //! Exceptions as the Modbus spec says: 01 illegal function (anything but 03, 04, 06, 16),
 //! 02 illegal data address (a range outside the map), 03 illegal data value (a quantity of 0 or
@@ -33,9 +42,9 @@ use rmodbus::server::{ModbusFrame, Read, Write};
 use rmodbus::{ErrorKind, ModbusProto};
 
 /// Input registers.
-pub const INPUT_REGISTERS: usize = 10;
+pub const INPUT_REGISTERS: usize = 18;
 /// Holding registers.
-pub const HOLDING_REGISTERS: usize = 2;
+pub const HOLDING_REGISTERS: usize = 3;
 /// Largest torque setpoint, 0.01 %.
 pub const SETPOINT_MAX: u16 = 10_000;
 /// Longest RTU frame (Modbus: 256 bytes).
@@ -53,6 +62,16 @@ pub enum Mode {
     Manual = 1,
     /// The built-in excitation profile (the paper's pulses).
     Profile = 2,
+}
+
+/// Arithmetic of the NARMAX pass (holding register 2).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Arithmetic {
+    /// f32 forward pass.
+    #[default]
+    F32 = 0,
+    /// Fixed point (`NarmaxQ`).
+    Fixed = 1,
 }
 
 impl Mode {
@@ -123,6 +142,22 @@ pub struct Published {
     pub narmax_flow_lps: f32,
     /// Sample counter.
     pub sample: u16,
+    /// White-box pressure residual, mca.
+    pub whitebox_pressure_residual_mca: f32,
+    /// White-box flow residual, l/s.
+    pub whitebox_flow_residual_lps: f32,
+    /// NARMAX pressure residual, mca.
+    pub narmax_pressure_residual_mca: f32,
+    /// NARMAX flow residual, l/s.
+    pub narmax_flow_residual_lps: f32,
+    /// VFD actual speed, rpm.
+    pub vfd_speed_rpm: f32,
+    /// VFD actual torque, %.
+    pub vfd_torque_pct: f32,
+    /// VFD status word.
+    pub vfd_status: u16,
+    /// Uptime, s.
+    pub uptime_s: u16,
 }
 
 /// `x · scale` rounded and clamped to 0..=u16::MAX; NaN gives 0.
@@ -161,6 +196,14 @@ impl Published {
             signed_register(self.narmax_pressure_mca, 1000.0),
             unsigned_register(self.narmax_flow_lps, 100.0),
             self.sample,
+            signed_register(self.whitebox_pressure_residual_mca, 1000.0),
+            signed_register(self.whitebox_flow_residual_lps, 100.0),
+            signed_register(self.narmax_pressure_residual_mca, 1000.0),
+            signed_register(self.narmax_flow_residual_lps, 100.0),
+            signed_register(self.vfd_speed_rpm, 10.0),
+            signed_register(self.vfd_torque_pct, 100.0),
+            self.vfd_status,
+            self.uptime_s,
         ]
     }
 }
@@ -200,6 +243,8 @@ pub struct ScadaSlave {
     pub setpoint: u16,
     /// Mode.
     pub mode: Mode,
+    /// NARMAX arithmetic.
+    pub arithmetic: Arithmetic,
 }
 
 impl ScadaSlave {
@@ -209,12 +254,13 @@ impl ScadaSlave {
             unit,
             setpoint: 0,
             mode: Mode::Stop,
+            arithmetic: Arithmetic::F32,
         })
     }
 
     /// The holding registers.
     pub fn holding(&self) -> [u16; HOLDING_REGISTERS] {
-        [self.setpoint, self.mode as u16]
+        [self.setpoint, self.mode as u16, self.arithmetic as u16]
     }
 
     /// Handles one received RTU frame (the bytes between two silences). Returns the response
@@ -292,6 +338,13 @@ impl ScadaSlave {
             match usize::from(address) + k {
                 0 if v <= SETPOINT_MAX => next.setpoint = v,
                 1 => next.mode = Mode::from_register(v).ok_or(ErrorKind::IllegalDataValue)?,
+                2 => {
+                    next.arithmetic = match v {
+                        0 => Arithmetic::F32,
+                        1 => Arithmetic::Fixed,
+                        _ => return Err(ErrorKind::IllegalDataValue),
+                    }
+                }
                 _ => return Err(ErrorKind::IllegalDataValue),
             }
         }
@@ -356,6 +409,10 @@ mod tests {
         assert_eq!((s.setpoint, s.mode), (4000, Mode::Manual));
         let r = ask(&mut s, &frame(&[1, 3, 0, 0, 0, 2])).unwrap();
         assert_eq!(&r[..7], &[1, 3, 4, 0x0F, 0xA0, 0, 1]);
+        ask(&mut s, &frame(&[1, 6, 0, 2, 0, 1])).unwrap();
+        assert_eq!(s.arithmetic, Arithmetic::Fixed);
+        let r = ask(&mut s, &frame(&[1, 4, 0, 17, 0, 1])).unwrap();
+        assert_eq!(&r[..5], &[1, 4, 2, 0, 117]);
     }
 
     #[test]
@@ -372,12 +429,12 @@ mod tests {
             "unknown function"
         );
         assert_eq!(
-            exception(&mut s, &[1, 4, 0, 9, 0, 2]),
+            exception(&mut s, &[1, 4, 0, 17, 0, 2]),
             2,
             "past the input map"
         );
         assert_eq!(
-            exception(&mut s, &[1, 3, 0, 2, 0, 1]),
+            exception(&mut s, &[1, 3, 0, 3, 0, 1]),
             2,
             "past the holding map"
         );
@@ -398,6 +455,7 @@ mod tests {
             "setpoint 10001"
         );
         assert_eq!(exception(&mut s, &[1, 6, 0, 1, 0, 3]), 3, "mode 3");
+        assert_eq!(exception(&mut s, &[1, 6, 0, 2, 0, 2]), 3, "arithmetic 2");
         assert_eq!(
             exception(&mut s, &[1, 16, 0, 0, 0, 2, 2, 0, 1]),
             3,
@@ -459,6 +517,11 @@ mod tests {
             narmax_pressure_mca: 2.6604,
             narmax_flow_lps: 15.776,
             sample: 65535,
+            whitebox_pressure_residual_mca: -0.0125,
+            vfd_speed_rpm: -12.34,
+            vfd_status: 0xBEEF,
+            uptime_s: 7,
+            ..Published::default()
         };
         let r = p.registers();
         assert_eq!(r[0], 0b10_0001);
@@ -471,6 +534,10 @@ mod tests {
         assert_eq!(r[7], 2660);
         assert_eq!(r[8], 1578);
         assert_eq!(r[9], 65535);
+        assert_eq!(r[10] as i16, -13);
+        assert_eq!(r[11], 0);
+        assert_eq!(r[14] as i16, -123);
+        assert_eq!((r[16], r[17]), (0xBEEF, 7));
         assert!(ScadaSlave::new(0).is_none() && ScadaSlave::new(248).is_none());
     }
 }

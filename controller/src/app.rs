@@ -1,0 +1,465 @@
+//! The controller's fixed-rate loop, board-independent: call [`App::tick`] every millisecond
+//! with the board's I/O ([`Io`]); hand SCADA frames to [`App::scada_frame`].
+//!
+//! Each tick:
+//! 1. the torque requested by the mode (holding register 1: stop → 0 %, manual → the
+//!    setpoint, profile → the paper's pulses, restarted from its seed on entry);
+//! 2. the VFD link: answers taken, timeouts and retries, the next exchange started; during
+//!    the link alarm the applied torque reference is the safe value, 0 %;
+//! 3. the applied reference to the torque output (DAC / PWM);
+//! 4. every pressure period (50 ms) the pressure transmitter is read, every flow period
+//!    (100 ms) the flow transmitter; each NARMAX model steps with its sample: one-step-ahead on
+//!    the measurement, or free run on its own predictions while the transmitter is in fault
+//!    (NAMUR NE 43, flagged on the sample that shows it); residuals (measured − predicted) for
+//!    the white-box and NARMAX models;
+//! 5. the white-box bench (f32, RK4) one 1 ms step with the applied reference;
+//! 6. once a second, a [`LogLine`].
+//!
+//! Nothing here touches hardware, so the whole loop runs in host tests against fakes.
+
+use crate::analog::{AnalogInput, LoopConfig, Status as InputStatus};
+use crate::scada::{Arithmetic, Mode, Published, Response, ScadaSlave, Status};
+use crate::vfd::{Frame, VfdMap, VfdMaster};
+use model_core::excitation::{PulseTrain, SteppedPulses};
+use model_core::narmax::fixed::{NarmaxQ, NarmaxQState};
+use model_core::narmax::{Narmax, NarmaxError, NarmaxOutput, NarmaxState};
+use model_core::{BenchError, BenchState, Scheme, Signals, WhiteBox};
+
+/// Loop period, ms: one [`App::tick`].
+pub const TICK_MS: u32 = 1;
+/// A log line every this many ms.
+pub const LOG_EVERY_MS: u32 = 1000;
+
+/// What a board gives the loop.
+pub trait Io {
+    /// Raw ADC code of the pressure transmitter's shunt.
+    fn pressure_code(&mut self) -> u16;
+    /// Raw ADC code of the flow transmitter's shunt.
+    fn flow_code(&mut self) -> u16;
+    /// Sets the VFD's analog torque reference, % of nominal (finite, 0..=100).
+    fn set_torque_ref(&mut self, pct: f32);
+    /// Sends one RTU frame to the VFD.
+    fn vfd_send(&mut self, frame: &[u8]);
+    /// Moves a complete RTU frame received from the VFD into `frame`; `false` if none.
+    fn vfd_receive(&mut self, now_ms: u32, frame: &mut Frame) -> bool;
+}
+
+/// Configuration of the loop.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AppConfig {
+    /// Pressure transmitter loop (mca at 4 and 20 mA).
+    pub pressure_loop: LoopConfig,
+    /// Flow transmitter loop (l/s at 4 and 20 mA).
+    pub flow_loop: LoopConfig,
+    /// VFD register map and link settings.
+    pub vfd: VfdMap,
+    /// SCADA unit address (1..=247).
+    pub scada_unit: u8,
+    /// Seed of the built-in excitation profile (mode 2).
+    pub profile_seed: u64,
+    /// Mode at start-up.
+    pub initial_mode: Mode,
+    /// Torque setpoint at start-up, 0.01 % (0..=10000).
+    pub initial_setpoint: u16,
+}
+
+impl AppConfig {
+    /// Pressure 0..10 mca and flow 0..30 l/s on [`LoopConfig::typical`] loops, the
+    /// [`VfdMap::example_16384`] drive, SCADA unit 1, profile seed 1, stopped.
+    pub const fn bench() -> Self {
+        Self {
+            pressure_loop: LoopConfig::typical(0.0, 10.0),
+            flow_loop: LoopConfig::typical(0.0, 30.0),
+            vfd: VfdMap::example_16384(),
+            scada_unit: 1,
+            profile_seed: 1,
+            initial_mode: Mode::Stop,
+            initial_setpoint: 0,
+        }
+    }
+}
+
+/// Why the loop could not be built.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum AppError {
+    /// A configuration value is out of range; the text says which.
+    Config(&'static str),
+    /// The white-box bench refused its parameters.
+    Bench(BenchError),
+    /// A NARMAX model could not be quantised.
+    Narmax(NarmaxError),
+}
+
+impl core::fmt::Display for AppError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            AppError::Config(what) => write!(f, "bad configuration: {what}"),
+            AppError::Bench(e) => write!(f, "white-box bench: {e}"),
+            AppError::Narmax(e) => write!(f, "NARMAX model: {e}"),
+        }
+    }
+}
+
+/// One NARMAX model in both arithmetics, with the history of the one in use.
+#[derive(Debug, Clone)]
+pub struct NarmaxModel<const N: usize, const H: usize> {
+    float: Narmax<f32, N, H>,
+    fixed: NarmaxQ<N, H>,
+    st: NarmaxState<f32, N>,
+    st_q: NarmaxQState<N>,
+    period_ms: u32,
+    last: f32,
+}
+
+impl<const N: usize, const H: usize> NarmaxModel<N, H> {
+    /// The model sampled every `period_ms` (≥ 1) ms; quantised here for the fixed-point pass.
+    pub fn new(float: Narmax<f32, N, H>, period_ms: u32) -> Result<Self, AppError> {
+        if period_ms == 0 {
+            return Err(AppError::Config("NARMAX period must be >= 1 ms"));
+        }
+        let fixed = NarmaxQ::quantize(&float).map_err(AppError::Narmax)?;
+        let (u0, y0) = (0.0, float.scaling().1.mean);
+        Ok(Self {
+            st: float.state_at(u0, y0),
+            st_q: fixed.state_at(u0, y0),
+            float,
+            fixed,
+            period_ms,
+            last: y0,
+        })
+    }
+
+    /// Sample period, ms.
+    pub fn period_ms(&self) -> u32 {
+        self.period_ms
+    }
+
+    /// Fills the history of `arith` with `(u, y)`.
+    fn reseed(&mut self, arith: Arithmetic, u: f32, y: f32) {
+        match arith {
+            Arithmetic::F32 => self.st = self.float.state_at(u, y),
+            Arithmetic::Fixed => self.st_q = self.fixed.state_at(u, y),
+        }
+        self.last = y;
+    }
+
+    /// One sample: one-step-ahead with a measurement, free run without.
+    fn step(&mut self, arith: Arithmetic, u: f32, measured: Option<f32>) -> NarmaxOutput<f32> {
+        let out = match (arith, measured) {
+            (Arithmetic::F32, Some(y)) => self.float.predict_step(&mut self.st, u, y),
+            (Arithmetic::F32, None) => self.float.simulate_step(&mut self.st, u),
+            (Arithmetic::Fixed, Some(y)) => self.fixed.predict_step(&mut self.st_q, u, y),
+            (Arithmetic::Fixed, None) => self.fixed.simulate_step(&mut self.st_q, u),
+        };
+        self.last = out.y;
+        out
+    }
+}
+
+/// A line of the once-a-second log.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LogLine {
+    /// Loop time, ms.
+    pub t_ms: u32,
+    /// Mode.
+    pub mode: Mode,
+    /// NARMAX arithmetic.
+    pub arithmetic: Arithmetic,
+    /// What the SCADA registers hold.
+    pub values: Published,
+}
+
+/// Writes `x` with `decimals` (≤ 6) decimals, rounded, without core's float formatting
+/// (≈ 7 KB of flash); non-finite values print as `nan`.
+pub fn write_fixed(out: &mut impl core::fmt::Write, x: f32, decimals: u32) -> core::fmt::Result {
+    if !x.is_finite() {
+        return out.write_str("nan");
+    }
+    let scale = 10i64.pow(decimals.min(6));
+    let scaled = (x as f64 * scale as f64 + if x < 0.0 { -0.5 } else { 0.5 }) as i64;
+    let sign = if scaled < 0 { "-" } else { "" };
+    let a = scaled.unsigned_abs();
+    let s = scale as u64;
+    write!(
+        out,
+        "{sign}{}.{:0w$}",
+        a / s,
+        a % s,
+        w = decimals.min(6) as usize
+    )
+}
+
+impl LogLine {
+    /// The line as text, e.g. `t_s=3 mode=manual u_pct=50.00 p_mca=… bits=…` (see the
+    /// README); `bits=` holds the raw f32 bits of measured and predicted values, which the
+    /// QEMU check compares with the host.
+    pub fn write_text(&self, out: &mut impl core::fmt::Write) -> core::fmt::Result {
+        let v = &self.values;
+        let mode = match self.mode {
+            Mode::Stop => "stop",
+            Mode::Manual => "manual",
+            Mode::Profile => "profile",
+        };
+        let arith = match self.arithmetic {
+            Arithmetic::F32 => "f32",
+            Arithmetic::Fixed => "q15",
+        };
+        write!(
+            out,
+            "t_s={} mode={mode} narmax={arith} u_pct=",
+            self.t_ms / 1000
+        )?;
+        let fields: [(&str, f32, u32); 12] = [
+            ("", v.torque_pct, 2),
+            (" p_mca=", v.pressure_mca, 3),
+            (" q_lps=", v.flow_lps, 2),
+            (" wb_rpm=", v.whitebox_speed_rpm, 1),
+            (" wb_p=", v.whitebox_pressure_mca, 3),
+            (" wb_q=", v.whitebox_flow_lps, 2),
+            (" nx_p=", v.narmax_pressure_mca, 3),
+            (" nx_q=", v.narmax_flow_lps, 2),
+            (" res_wb_p=", v.whitebox_pressure_residual_mca, 3),
+            (" res_wb_q=", v.whitebox_flow_residual_lps, 2),
+            (" res_nx_p=", v.narmax_pressure_residual_mca, 3),
+            (" res_nx_q=", v.narmax_flow_residual_lps, 2),
+        ];
+        for (name, x, d) in fields {
+            out.write_str(name)?;
+            write_fixed(out, x, d)?;
+        }
+        write!(out, " vfd_rpm=")?;
+        write_fixed(out, v.vfd_speed_rpm, 1)?;
+        write!(
+            out,
+            " status={:#04x} bits={:08x},{:08x},{:08x},{:08x},{:08x}",
+            v.status.bits(),
+            v.whitebox_speed_rpm.to_bits(),
+            v.pressure_mca.to_bits(),
+            v.flow_lps.to_bits(),
+            v.narmax_pressure_mca.to_bits(),
+            v.narmax_flow_lps.to_bits()
+        )
+    }
+}
+
+/// The controller.
+#[derive(Debug, Clone)]
+pub struct App<const NP: usize, const HP: usize, const NF: usize, const HF: usize> {
+    whitebox: WhiteBox<f32>,
+    wb: BenchState<f32>,
+    pressure: NarmaxModel<NP, HP>,
+    flow: NarmaxModel<NF, HF>,
+    arithmetic: Arithmetic,
+    pressure_in: AnalogInput,
+    flow_in: AnalogInput,
+    vfd: VfdMaster,
+    scada: ScadaSlave,
+    profile_seed: u64,
+    profile: Option<SteppedPulses>,
+    t_ms: u32,
+    model_fault: bool,
+    wb_extrapolating: bool,
+    nx_clamped: [bool; 2],
+    out: Published,
+    tx: Frame,
+    rx: Frame,
+}
+
+impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize> App<NP, HP, NF, HF> {
+    /// The loop with the paper's white-box bench and the two NARMAX models, at rest.
+    pub fn new(
+        config: AppConfig,
+        pressure: NarmaxModel<NP, HP>,
+        flow: NarmaxModel<NF, HF>,
+    ) -> Result<Self, AppError> {
+        let pressure_in =
+            AnalogInput::new(config.pressure_loop).ok_or(AppError::Config("pressure loop"))?;
+        let flow_in = AnalogInput::new(config.flow_loop).ok_or(AppError::Config("flow loop"))?;
+        let vfd = VfdMaster::new(config.vfd).ok_or(AppError::Config("VFD map"))?;
+        let mut scada = ScadaSlave::new(config.scada_unit).ok_or(AppError::Config("SCADA unit"))?;
+        if config.initial_setpoint > crate::scada::SETPOINT_MAX {
+            return Err(AppError::Config("initial setpoint above 10000"));
+        }
+        scada.mode = config.initial_mode;
+        scada.setpoint = config.initial_setpoint;
+        let whitebox = WhiteBox::<f32>::paper();
+        let wb = whitebox.steady_state(0.0).map_err(AppError::Bench)?;
+        let mut app = Self {
+            whitebox,
+            wb,
+            pressure,
+            flow,
+            arithmetic: Arithmetic::F32,
+            pressure_in,
+            flow_in,
+            vfd,
+            scada,
+            profile_seed: config.profile_seed,
+            profile: None,
+            t_ms: 0,
+            model_fault: false,
+            wb_extrapolating: false,
+            nx_clamped: [false; 2],
+            out: Published::default(),
+            tx: Frame::new(),
+            rx: Frame::new(),
+        };
+        let s = app.whitebox.signals(&app.wb);
+        app.pressure.reseed(Arithmetic::F32, 0.0, s.pressure_mca);
+        app.flow.reseed(Arithmetic::F32, 0.0, s.flow_lps);
+        Ok(app)
+    }
+
+    /// Loop time, ms (ticks since start).
+    pub fn now_ms(&self) -> u32 {
+        self.t_ms
+    }
+
+    /// What the SCADA registers hold now.
+    pub fn published(&self) -> &Published {
+        &self.out
+    }
+
+    /// The SCADA slave's holding registers (setpoint, mode, arithmetic).
+    pub fn scada(&self) -> &ScadaSlave {
+        &self.scada
+    }
+
+    /// The VFD master (link state, readings).
+    pub fn vfd(&self) -> &VfdMaster {
+        &self.vfd
+    }
+
+    /// The white-box model's signals now.
+    pub fn whitebox_signals(&self) -> Signals<f32> {
+        self.whitebox.signals(&self.wb)
+    }
+
+    /// Handles one SCADA RTU frame; the answer (if any) is in `response`.
+    pub fn scada_frame(&mut self, frame: &[u8], response: &mut Response) -> Option<usize> {
+        let registers = self.out.registers();
+        self.scada.handle(frame, &registers, response)
+    }
+
+    fn requested_torque_pct(&mut self) -> f32 {
+        match self.scada.mode {
+            Mode::Stop => {
+                self.profile = None;
+                0.0
+            }
+            Mode::Manual => {
+                self.profile = None;
+                f32::from(self.scada.setpoint) / 100.0
+            }
+            Mode::Profile => {
+                let seed = self.profile_seed;
+                let p = self
+                    .profile
+                    .get_or_insert_with(|| SteppedPulses::new(PulseTrain::paper(seed), TICK_MS));
+                p.next().map_or(0.0, |(_, u)| u as f32)
+            }
+        }
+    }
+
+    /// One millisecond of the loop (see the module docs); a log line once a second.
+    pub fn tick(&mut self, io: &mut impl Io) -> Option<LogLine> {
+        let now = self.t_ms;
+        let requested = self.requested_torque_pct();
+
+        while io.vfd_receive(now, &mut self.rx) {
+            self.vfd.receive(&self.rx);
+        }
+        if self.vfd.poll(now, &mut self.tx).is_some() {
+            io.vfd_send(&self.tx);
+        }
+        if self.vfd.start(now, requested, &mut self.tx).is_some() {
+            io.vfd_send(&self.tx);
+        }
+        let u = self.vfd.applied_torque_pct(requested);
+        io.set_torque_ref(u);
+
+        if self.scada.arithmetic != self.arithmetic {
+            // The other arithmetic's history is stale: start it at the last predictions.
+            self.arithmetic = self.scada.arithmetic;
+            let (p, q) = (self.pressure.last, self.flow.last);
+            self.pressure.reseed(self.arithmetic, u, p);
+            self.flow.reseed(self.arithmetic, u, q);
+        }
+
+        let take_p = now.is_multiple_of(self.pressure.period_ms);
+        let take_q = now.is_multiple_of(self.flow.period_ms);
+        if take_p || take_q {
+            let wb = self.whitebox.signals(&self.wb);
+            self.wb_extrapolating = wb.extrapolation.any();
+            let o = &mut self.out;
+            o.whitebox_speed_rpm = wb.speed_rpm;
+            o.whitebox_pressure_mca = wb.pressure_mca;
+            o.whitebox_flow_lps = wb.flow_lps;
+            if take_p {
+                let r = self.pressure_in.sample(io.pressure_code());
+                let good = r.status != InputStatus::Fault;
+                let nx = self
+                    .pressure
+                    .step(self.arithmetic, u, good.then_some(r.value));
+                self.nx_clamped[0] = nx.clamped;
+                o.pressure_mca = r.value;
+                o.narmax_pressure_mca = nx.y;
+                (
+                    o.whitebox_pressure_residual_mca,
+                    o.narmax_pressure_residual_mca,
+                ) = if good {
+                    (r.value - wb.pressure_mca, r.value - nx.y)
+                } else {
+                    (0.0, 0.0)
+                };
+                o.sample = o.sample.wrapping_add(1);
+            }
+            if take_q {
+                let r = self.flow_in.sample(io.flow_code());
+                let good = r.status != InputStatus::Fault;
+                let nx = self.flow.step(self.arithmetic, u, good.then_some(r.value));
+                self.nx_clamped[1] = nx.clamped;
+                o.flow_lps = r.value;
+                o.narmax_flow_lps = nx.y;
+                (o.whitebox_flow_residual_lps, o.narmax_flow_residual_lps) = if good {
+                    (r.value - wb.flow_lps, r.value - nx.y)
+                } else {
+                    (0.0, 0.0)
+                };
+            }
+        }
+
+        // The torque is finite and within 0..=100 % (applied_torque_pct), the step fixed: an
+        // error here means a diverged state, which is kept and flagged.
+        self.model_fault |= self
+            .whitebox
+            .step(&mut self.wb, u, TICK_MS as f32 * 1e-3, Scheme::Rk4)
+            .is_err();
+
+        let link_ok = !self.vfd.alarm();
+        let (p_fault, q_fault) = (self.pressure_in.faulted(), self.flow_in.faulted());
+        let readings = self.vfd.readings();
+        let o = &mut self.out;
+        o.status = Status {
+            running: self.scada.mode != Mode::Stop,
+            any_alarm: !link_ok || p_fault || q_fault || self.model_fault,
+            extrapolating: self.wb_extrapolating || self.nx_clamped.iter().any(|&c| c),
+            vfd_link_ok: link_ok,
+            pressure_fault: p_fault,
+            flow_fault: q_fault,
+        };
+        o.torque_pct = u;
+        o.vfd_speed_rpm = readings.speed_rpm;
+        o.vfd_torque_pct = readings.torque_pct;
+        o.vfd_status = readings.status;
+        o.uptime_s = (now / 1000) as u16;
+
+        self.t_ms = now.wrapping_add(TICK_MS);
+        now.is_multiple_of(LOG_EVERY_MS).then_some(LogLine {
+            t_ms: now,
+            mode: self.scada.mode,
+            arithmetic: self.arithmetic,
+            values: self.out,
+        })
+    }
+}

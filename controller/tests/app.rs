@@ -1,0 +1,219 @@
+#![allow(dead_code)] // the model files carry constants the loop does not use
+//! The 1 ms loop on the virtual bench, on the host: operating point, VFD link alarm,
+//! transmitter faults, the profile, the arithmetic switch and the SCADA registers.
+
+use controller::app::{App, AppConfig, LogLine, NarmaxModel};
+use controller::bench::{VirtualBench, VirtualBenchConfig, VirtualIo};
+use controller::scada::{crc16, Mode, Response};
+use model_core::WhiteBox;
+
+/// The firmware's models, the very files it compiles in.
+#[path = "../../firmware/src/models/flow.rs"]
+mod flow_model;
+#[path = "../../firmware/src/models/pressure.rs"]
+mod pressure_model;
+
+type Loop = App<
+    { pressure_model::INPUTS },
+    { pressure_model::HIDDEN },
+    { flow_model::INPUTS },
+    { flow_model::HIDDEN },
+>;
+
+fn setup(mode: Mode, setpoint: u16) -> (Loop, VirtualIo) {
+    let cfg = AppConfig {
+        initial_mode: mode,
+        initial_setpoint: setpoint,
+        ..AppConfig::bench()
+    };
+    let p = NarmaxModel::new(pressure_model::model().unwrap(), 50).unwrap();
+    let q = NarmaxModel::new(flow_model::model().unwrap(), 100).unwrap();
+    let app = App::new(cfg, p, q).unwrap();
+    let bench = VirtualBench::new(VirtualBenchConfig::default_offsets(7)).unwrap();
+    (app, VirtualIo::new(bench, cfg.vfd).unwrap())
+}
+
+fn run(app: &mut Loop, io: &mut VirtualIo, ms: u32) -> Vec<LogLine> {
+    let mut logs = vec![];
+    for _ in 0..ms {
+        logs.extend(app.tick(io));
+        io.step_1ms().unwrap();
+    }
+    logs
+}
+
+fn with_crc(body: &[u8]) -> Vec<u8> {
+    let mut f = body.to_vec();
+    f.extend_from_slice(&crc16(body).to_le_bytes());
+    f
+}
+
+fn read_inputs(app: &mut Loop) -> Vec<u16> {
+    let mut r = Response::new();
+    let n = app
+        .scada_frame(&with_crc(&[1, 4, 0, 0, 0, 18]), &mut r)
+        .unwrap();
+    assert_eq!(n, 5 + 36);
+    r[3..39]
+        .chunks(2)
+        .map(|w| u16::from_be_bytes([w[0], w[1]]))
+        .collect()
+}
+
+fn rel(a: f32, b: f32) -> f32 {
+    (a / b - 1.0).abs()
+}
+
+#[test]
+fn manual_50_pct_reaches_the_operating_point_in_3_s() {
+    let (mut app, mut io) = setup(Mode::Stop, 0);
+    run(&mut app, &mut io, 500);
+    assert_eq!(io.torque_ref_pct(), 0.0);
+    // What a SCADA does: setpoint 50 %, manual mode (FC 16).
+    let mut r = Response::new();
+    let req = with_crc(&[1, 16, 0, 0, 0, 2, 4, 0x13, 0x88, 0, 1]);
+    assert!(app.scada_frame(&req, &mut r).is_some());
+    run(&mut app, &mut io, 3000);
+    let model = WhiteBox::<f32>::paper();
+    let op = model.signals(&model.steady_state(50.0).unwrap());
+    let regs = read_inputs(&mut app);
+    let speed = f32::from(regs[6]) / 10.0;
+    let p_meas = f32::from(regs[2] as i16) / 1000.0;
+    let q_meas = f32::from(regs[3]) / 100.0;
+    let p_nx = f32::from(regs[7] as i16) / 1000.0;
+    println!(
+        "50 %: model {:.1} rpm {:.3} mca {:.2} l/s; registers {speed} rpm, measured {p_meas} mca {q_meas} l/s, NARMAX {p_nx} mca",
+        op.speed_rpm, op.pressure_mca, op.flow_lps
+    );
+    assert_eq!(regs[1], 5000, "applied torque");
+    assert!(rel(speed, op.speed_rpm) < 0.01, "white-box speed {speed}");
+    assert!(
+        rel(p_meas, op.pressure_mca) < 0.05,
+        "measured pressure {p_meas}"
+    );
+    assert!(rel(q_meas, op.flow_lps) < 0.03, "measured flow {q_meas}");
+    assert!(rel(p_nx, p_meas) < 0.05, "NARMAX pressure {p_nx}");
+    assert_eq!(regs[0] & 0b1011, 0b1001, "running, VFD link ok, no alarm");
+    let vfd_rpm = f32::from(regs[14] as i16) / 10.0;
+    assert!(
+        (vfd_rpm - io.bench.signals().speed_rpm).abs() < 2.0,
+        "VFD speed {vfd_rpm}"
+    );
+}
+
+#[test]
+fn vfd_link_loss_forces_zero_torque_until_it_is_back() {
+    let (mut app, mut io) = setup(Mode::Manual, 4000);
+    run(&mut app, &mut io, 200);
+    assert_eq!(io.torque_ref_pct(), 40.0);
+    assert!(!app.vfd().alarm());
+    io.link_up = false;
+    // 3 exchanges of 3 attempts (request + 2 retries) × 100 ms each.
+    run(&mut app, &mut io, 850);
+    assert!(!app.vfd().alarm(), "two failed exchanges do not raise it");
+    let mut t = 0;
+    while !app.vfd().alarm() {
+        run(&mut app, &mut io, 1);
+        t += 1;
+        assert!(t < 200, "no alarm after the third failed exchange");
+    }
+    run(&mut app, &mut io, 1);
+    assert_eq!(io.torque_ref_pct(), 0.0);
+    let regs = read_inputs(&mut app);
+    assert_eq!(regs[0] & 0b1010, 0b0010, "alarm, link not ok");
+    assert_eq!(regs[1], 0);
+    io.link_up = true;
+    run(&mut app, &mut io, 400);
+    assert!(!app.vfd().alarm());
+    assert_eq!(io.torque_ref_pct(), 40.0);
+}
+
+#[test]
+fn a_transmitter_fault_is_flagged_within_one_sample_and_models_run_on() {
+    let (mut app, mut io) = setup(Mode::Manual, 6000);
+    run(&mut app, &mut io, 3000);
+    let before = read_inputs(&mut app);
+    io.bench.force_pressure_ma = Some(2.0);
+    run(&mut app, &mut io, 50);
+    let regs = read_inputs(&mut app);
+    assert_eq!(regs[0] & 0b1_0010, 0b1_0010, "pressure fault and alarm");
+    for _ in 0..20 {
+        run(&mut app, &mut io, 50);
+        let r = read_inputs(&mut app);
+        let (nx, before_nx) = (r[7] as i16, before[7] as i16);
+        assert!(
+            (nx - before_nx).abs() < 100,
+            "free-run NARMAX pressure {nx} vs {before_nx}"
+        );
+        assert_eq!(r[12], 0, "no residual during the fault");
+    }
+    io.bench.force_pressure_ma = None;
+    run(&mut app, &mut io, 100);
+    assert_ne!(
+        read_inputs(&mut app)[0] & 0b1_0000,
+        0,
+        "2 good samples: not cleared"
+    );
+    run(&mut app, &mut io, 50);
+    assert_eq!(read_inputs(&mut app)[0] & 0b1_0010, 0, "cleared after 3");
+    io.bench.force_flow_ma = Some(22.0);
+    run(&mut app, &mut io, 100);
+    assert_eq!(
+        read_inputs(&mut app)[0] & 0b10_0000,
+        0b10_0000,
+        "flow fault"
+    );
+}
+
+#[test]
+fn profile_logs_once_a_second_and_repeats_from_its_seed() {
+    let (mut a, mut io_a) = setup(Mode::Profile, 0);
+    let (mut b, mut io_b) = setup(Mode::Profile, 0);
+    let la = run(&mut a, &mut io_a, 5001);
+    let lb = run(&mut b, &mut io_b, 5001);
+    assert_eq!(la.len(), 6);
+    assert_eq!(la, lb);
+    let mut text = String::new();
+    la[5].write_text(&mut text).unwrap();
+    assert!(
+        text.starts_with("t_s=5 mode=profile narmax=f32 u_pct="),
+        "{text}"
+    );
+    let torques: Vec<f32> = la.iter().map(|l| l.values.torque_pct).collect();
+    assert!(
+        torques[1..].iter().all(|&u| (5.0..85.0).contains(&u)),
+        "{torques:?}"
+    );
+}
+
+#[test]
+fn fixed_point_narmax_follows_f32() {
+    let (mut a, mut io_a) = setup(Mode::Profile, 0);
+    let (mut b, mut io_b) = setup(Mode::Profile, 0);
+    let mut r = Response::new();
+    b.scada_frame(&with_crc(&[1, 6, 0, 2, 0, 1]), &mut r)
+        .unwrap();
+    let (la, lb) = (
+        run(&mut a, &mut io_a, 10_001),
+        run(&mut b, &mut io_b, 10_001),
+    );
+    assert_eq!(lb[3].arithmetic, controller::scada::Arithmetic::Fixed);
+    for (x, y) in la.iter().zip(&lb).skip(1) {
+        let (p, pq) = (x.values.narmax_pressure_mca, y.values.narmax_pressure_mca);
+        assert!((p - pq).abs() < 0.02, "{p} vs {pq}");
+    }
+}
+
+#[test]
+fn residuals_are_measured_minus_predicted() {
+    let (mut app, mut io) = setup(Mode::Manual, 7000);
+    run(&mut app, &mut io, 4001);
+    let v = *app.published();
+    assert!(
+        (v.whitebox_pressure_residual_mca - (v.pressure_mca - v.whitebox_pressure_mca)).abs()
+            < 1e-6
+    );
+    assert!((v.narmax_flow_residual_lps - (v.flow_lps - v.narmax_flow_lps)).abs() < 1e-6);
+    // The virtual bench is a few percent off the model: the white-box residual shows it.
+    assert!(v.whitebox_pressure_residual_mca.abs() > 0.01, "{v:?}");
+}
