@@ -1,23 +1,26 @@
-//! First cut of the bench controller firmware: runs the paper's white-box bench in f32 and
-//! the two NARMAX models (pressure every 50 ms, flow every 100 ms; f32 and fixed point) on a
-//! built-in excitation (the paper's pulses, 5..85 %), prints a sample every 500 ms over
-//! semihosting, the SysTick cost of each model step, and exits 0. Under QEMU (`cargo qemu`)
-//! it needs no board.
+//! The bench controller firmware: the controller loop of the `controller` crate (SCADA Modbus
+//! slave, VFD Modbus master, 4-20 mA inputs, torque output, the white-box and NARMAX models)
+//! paced by a 1 ms SysTick, on one of two boards chosen by a cargo feature:
 //!
-//! Each line carries the values in readable units and, after `bits=`, their raw f32 bits:
-//! `cargo xtask test` replays the same excitation with model-core on the host and requires
-//! the same bits. The NARMAX models are `src/models/*.rs`, made by `pumpbench export`.
+//! - `qemu` (default): QEMU `netduinoplus2` (STM32F405) with the on-chip virtual bench; text
+//!   logs over semihosting ([`qemu`]);
+//! - `nucleo-f446re`: a NUCLEO-F446RE with the real transmitters, DAC and RS-485 links; defmt
+//!   logs over RTT ([`nucleo`]).
+//!
+//! The NARMAX models are `src/models/*.rs`, made by `pumpbench export`.
 #![no_std]
 #![no_main]
 
-use core::fmt::Write as _;
-use cortex_m::peripheral::{syst::SystClkSource, Peripherals};
-use cortex_m_rt::entry;
-use cortex_m_semihosting::{debug, hio};
-use model_core::excitation::{PulseTrain, SteppedPulses};
-use model_core::narmax::fixed::NarmaxQ;
-use model_core::{Scheme, WhiteBox};
-use panic_semihosting as _;
+#[cfg(all(feature = "qemu", feature = "nucleo-f446re"))]
+compile_error!("choose one board: the default (qemu) or `--no-default-features --features nucleo-f446re`");
+#[cfg(not(any(feature = "qemu", feature = "nucleo-f446re")))]
+compile_error!("choose a board: `--features qemu` or `--features nucleo-f446re`");
+
+use controller::app::{App, AppConfig, AppError, Io, LogLine, NarmaxModel};
+use controller::rtu::{Frame, RtuPort, Uart};
+use controller::scada::Response;
+use core::sync::atomic::{AtomicU32, Ordering};
+use cortex_m_rt::{entry, exception};
 
 /// The NARMAX models compiled in (`pumpbench export`).
 mod models {
@@ -25,179 +28,103 @@ mod models {
     pub mod pressure;
 }
 
+#[cfg(feature = "nucleo-f446re")]
+mod nucleo;
+#[cfg(feature = "qemu")]
+mod qemu;
+
 /// Pressure model period, ms.
 const PRESSURE_MS: u32 = (models::pressure::SAMPLE_PERIOD_S * 1000.0 + 0.5) as u32;
 /// Flow model period, ms.
 const FLOW_MS: u32 = (models::flow::SAMPLE_PERIOD_S * 1000.0 + 0.5) as u32;
 
-/// Seed of the built-in excitation.
-const SEED: u64 = 1;
-/// Simulated time, ms.
-const DURATION_MS: u32 = 20_000;
-/// Integration step, ms.
-const STEP_MS: u32 = 1;
-/// Print a sample every this many ms.
-const PRINT_EVERY_MS: u32 = 500;
-/// SysTick's 24-bit counter mask.
-const SYST_MASK: u32 = 0x00FF_FFFF;
+/// The controller loop with the compiled-in models.
+pub type Loop = App<
+    { models::pressure::INPUTS },
+    { models::pressure::HIDDEN },
+    { models::flow::INPUTS },
+    { models::flow::HIDDEN },
+>;
 
-/// Writes `x` with `decimals` decimals, rounded, without core's float formatting (≈ 7 KB).
-fn fixed(out: &mut impl core::fmt::Write, x: f32, decimals: u32) -> core::fmt::Result {
-    let scale = 10i64.pow(decimals);
-    let scaled = (x as f64 * scale as f64 + if x < 0.0 { -0.5 } else { 0.5 }) as i64;
-    let sign = if scaled < 0 { "-" } else { "" };
-    let a = scaled.unsigned_abs();
-    let s = scale as u64;
-    write!(out, "{sign}{}.{:0w$}", a / s, a % s, w = decimals as usize)
+/// Builds the loop (models checked and quantised here, once).
+pub fn build_loop(config: AppConfig) -> Result<Loop, AppError> {
+    let p = models::pressure::model().map_err(AppError::Narmax)?;
+    let q = models::flow::model().map_err(AppError::Narmax)?;
+    App::new(
+        config,
+        NarmaxModel::new(p, PRESSURE_MS)?,
+        NarmaxModel::new(q, FLOW_MS)?,
+    )
 }
 
-/// Elapsed SysTick ticks since `start` (the counter counts down, 24 bits).
-fn ticks_since(start: u32) -> u64 {
-    u64::from(start.wrapping_sub(cortex_m::peripheral::SYST::get_current()) & SYST_MASK)
+/// Milliseconds since SysTick started (wraps after 49 days; the loop uses wrapping time).
+static TICKS: AtomicU32 = AtomicU32::new(0);
+
+/// The 1 ms time base.
+#[exception]
+fn SysTick() {
+    TICKS.fetch_add(1, Ordering::Relaxed);
 }
 
-/// Sum of SysTick ticks and calls, for one model step.
-#[derive(Default)]
-struct Cost {
-    ticks: u64,
-    calls: u64,
+/// Milliseconds since start.
+pub fn now_ms() -> u32 {
+    TICKS.load(Ordering::Relaxed)
 }
 
-impl Cost {
-    /// Runs `f`, adding its SysTick ticks and one call.
-    fn time<R>(&mut self, f: impl FnOnce() -> R) -> R {
-        let t0 = cortex_m::peripheral::SYST::get_current();
-        let r = f();
-        self.ticks += ticks_since(t0);
-        self.calls += 1;
-        r
+/// Starts SysTick at 1 ms from a core clock of `core_hz`.
+pub fn start_systick(mut syst: cortex_m::peripheral::SYST, core_hz: u32) {
+    use cortex_m::peripheral::syst::SystClkSource;
+    syst.set_clock_source(SystClkSource::Core);
+    syst.set_reload(core_hz / 1000 - 1);
+    syst.clear_current();
+    syst.enable_interrupt();
+    syst.enable_counter();
+}
+
+/// What a board adds to [`Io`] for [`serve`].
+pub trait Board: Io {
+    /// Moves serial bytes (the VFD port); called on every pass of the loop.
+    fn poll(&mut self, now_ms: u32);
+    /// After each 1 ms tick, with its log line if it made one; `false` ends [`serve`].
+    fn after_tick(&mut self, log: Option<&LogLine>) -> bool;
+    /// Nothing to do until the next event (QEMU: `wfi`; a board polling a line at 19 200 baud
+    /// returns at once).
+    fn idle(&mut self) {}
+}
+
+/// The loop: SCADA frames answered as they complete, one [`App::tick`] per elapsed
+/// millisecond (late ticks are caught up, none is skipped), the board polled in between.
+/// Returns when the board's [`Board::after_tick`] says so.
+pub fn serve<S: Uart, B: Board>(app: &mut Loop, scada: &mut RtuPort<S>, board: &mut B) {
+    let mut frame = Frame::new();
+    let mut response = Response::new();
+    loop {
+        let now = now_ms();
+        board.poll(now);
+        if scada.receive(now, &mut frame) {
+            if let Some(n) = app.scada_frame(&frame, &mut response) {
+                scada.send(&response[..n]);
+            }
+        }
+        let mut ticked = false;
+        while now.wrapping_sub(app.now_ms()) as i32 >= 0 {
+            let log = app.tick(board);
+            if !board.after_tick(log.as_ref()) {
+                return;
+            }
+            ticked = true;
+        }
+        scada.poll(now);
+        if !ticked && !scada.sending() {
+            board.idle();
+        }
     }
-
-    fn per_call(&self) -> u64 {
-        self.ticks / self.calls.max(1)
-    }
-}
-
-fn run(out: &mut impl core::fmt::Write) -> Result<u32, core::fmt::Error> {
-    let mut cp = Peripherals::take().ok_or(core::fmt::Error)?;
-    cp.SYST.set_clock_source(SystClkSource::Core);
-    cp.SYST.set_reload(SYST_MASK);
-    cp.SYST.clear_current();
-    cp.SYST.enable_counter();
-
-    let bench = WhiteBox::<f32>::paper();
-    let bad = |_| core::fmt::Error;
-    let p_f32 = models::pressure::model().map_err(bad)?;
-    let f_f32 = models::flow::model().map_err(bad)?;
-    let p_q15 = NarmaxQ::quantize(&p_f32).map_err(bad)?;
-    let f_q15 = NarmaxQ::quantize(&f_f32).map_err(bad)?;
-    let (mut p, mut pq, mut f, mut fq) = (0.0f32, 0.0f32, 0.0f32, 0.0f32);
-    let (mut c_p, mut c_pq, mut c_f, mut c_fq) = (
-        Cost::default(),
-        Cost::default(),
-        Cost::default(),
-        Cost::default(),
-    );
-    writeln!(
-        out,
-        "firmware: white-box bench f32 RK4 step_ms={STEP_MS} seed={SEED} duration_ms={DURATION_MS}"
-    )?;
-    let mut schedule = SteppedPulses::new(PulseTrain::paper(SEED), STEP_MS).peekable();
-    let u0 = schedule.peek().map_or(0.0, |&(_, u)| u as f32);
-    // The bench starts at the steady state of the first torque; the NARMAX histories start
-    // at that state's pressure and flow (as if seeded from measurements).
-    let st = &mut bench.steady_state(u0).map_err(|_| core::fmt::Error)?;
-    let s0 = bench.signals(st);
-    let p_st = &mut p_f32.state_at(u0, s0.pressure_mca);
-    let pq_st = &mut p_q15.state_at(u0, s0.pressure_mca);
-    let f_st = &mut f_f32.state_at(u0, s0.flow_lps);
-    let fq_st = &mut f_q15.state_at(u0, s0.flow_lps);
-    let mut ticks: u64 = 0;
-    let mut steps = 0u32;
-    for (t_ms, torque) in schedule {
-        if t_ms > DURATION_MS {
-            break;
-        }
-        let torque_pct = torque as f32;
-        if t_ms % PRESSURE_MS == 0 {
-            p = c_p.time(|| p_f32.simulate_step(p_st, torque_pct).y);
-            pq = c_pq.time(|| p_q15.simulate_step(pq_st, torque_pct).y);
-        }
-        if t_ms % FLOW_MS == 0 {
-            f = c_f.time(|| f_f32.simulate_step(f_st, torque_pct).y);
-            fq = c_fq.time(|| f_q15.simulate_step(fq_st, torque_pct).y);
-        }
-        if t_ms % PRINT_EVERY_MS == 0 {
-            let s = bench.signals(st);
-            write!(out, "sample t_ms={t_ms} u_pct=")?;
-            fixed(out, torque_pct, 2)?;
-            write!(out, " speed_rpm=")?;
-            fixed(out, s.speed_rpm, 1)?;
-            write!(out, " flow_lps=")?;
-            fixed(out, s.flow_lps, 2)?;
-            write!(out, " pressure_mca=")?;
-            fixed(out, s.pressure_mca, 3)?;
-            writeln!(
-                out,
-                " bits={:08x},{:08x},{:08x}",
-                s.speed_rpm.to_bits(),
-                s.flow_lps.to_bits(),
-                s.pressure_mca.to_bits()
-            )?;
-            write!(out, "narmax t_ms={t_ms} pressure_mca=")?;
-            fixed(out, p, 3)?;
-            write!(out, " pressure_q15_mca=")?;
-            fixed(out, pq, 3)?;
-            write!(out, " flow_lps=")?;
-            fixed(out, f, 2)?;
-            write!(out, " flow_q15_lps=")?;
-            fixed(out, fq, 2)?;
-            writeln!(
-                out,
-                " bits={:08x},{:08x},{:08x},{:08x}",
-                p.to_bits(),
-                pq.to_bits(),
-                f.to_bits(),
-                fq.to_bits()
-            )?;
-        }
-        let start = cortex_m::peripheral::SYST::get_current();
-        bench
-            .step(st, torque_pct, STEP_MS as f32 * 1e-3, Scheme::Rk4)
-            .map_err(|_| core::fmt::Error)?;
-        ticks += ticks_since(start);
-        steps += 1;
-    }
-    writeln!(
-        out,
-        "timing rk4_steps={steps} systick_ticks_per_step={}",
-        ticks / u64::from(steps.max(1))
-    )?;
-    writeln!(
-        out,
-        "timing narmax_steps={} systick_ticks_per_step pressure_f32={} pressure_q15={} flow_f32={} flow_q15={}",
-        c_p.calls,
-        c_p.per_call(),
-        c_pq.per_call(),
-        c_f.per_call(),
-        c_fq.per_call()
-    )?;
-    Ok(steps)
 }
 
 #[entry]
 fn main() -> ! {
-    let code = match hio::hstdout() {
-        Ok(mut out) => match run(&mut out) {
-            Ok(_) => {
-                let _ = writeln!(out, "done");
-                debug::EXIT_SUCCESS
-            }
-            Err(_) => debug::EXIT_FAILURE,
-        },
-        Err(_) => debug::EXIT_FAILURE,
-    };
-    debug::exit(code);
-    #[allow(clippy::empty_loop)]
-    loop {}
+    #[cfg(feature = "qemu")]
+    qemu::run();
+    #[cfg(feature = "nucleo-f446re")]
+    nucleo::run();
 }
