@@ -61,11 +61,13 @@ pub struct AppConfig {
     pub initial_mode: Mode,
     /// Torque setpoint at start-up, 0.01 % (0..=10000).
     pub initial_setpoint: u16,
+    /// NARMAX arithmetic at start-up.
+    pub initial_arithmetic: Arithmetic,
 }
 
 impl AppConfig {
     /// Pressure 0..10 mca and flow 0..30 l/s on [`LoopConfig::typical`] loops, the
-    /// [`VfdMap::example_16384`] drive, SCADA unit 1, profile seed 1, stopped.
+    /// [`VfdMap::example_16384`] drive, SCADA unit 1, profile seed 1, stopped, NARMAX in f32.
     pub const fn bench() -> Self {
         Self {
             pressure_loop: LoopConfig::typical(0.0, 10.0),
@@ -75,6 +77,7 @@ impl AppConfig {
             profile_seed: 1,
             initial_mode: Mode::Stop,
             initial_setpoint: 0,
+            initial_arithmetic: Arithmetic::F32,
         }
     }
 }
@@ -282,6 +285,7 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize> App<NP,
         }
         scada.mode = config.initial_mode;
         scada.setpoint = config.initial_setpoint;
+        scada.arithmetic = config.initial_arithmetic;
         let whitebox = WhiteBox::<f32>::paper();
         let wb = whitebox.steady_state(0.0).map_err(AppError::Bench)?;
         let mut app = Self {

@@ -64,9 +64,149 @@ impl RtuFramer {
     }
 }
 
+/// A byte-wide serial port, polled (a board's USART, RS-485 transceiver included).
+pub trait Uart {
+    /// A received byte, if one is waiting.
+    fn try_read(&mut self) -> Option<u8>;
+    /// Queues `byte` for sending; `false` if the transmitter is busy (try again).
+    fn try_write(&mut self, byte: u8) -> bool;
+    /// `true` once the last byte has left the shift register (USART TC).
+    fn tx_complete(&mut self) -> bool;
+    /// Drives the RS-485 transceiver (`true` while sending); nothing for a plain UART.
+    fn set_driver(&mut self, _on: bool) {}
+}
+
+/// A half-duplex RTU port: frames in by silence ([`RtuFramer`]), one frame out at a time,
+/// the RS-485 driver enabled from the first byte to the end of the last. Bytes received while
+/// sending (the transceiver's echo) are dropped. Call [`RtuPort::poll`] as often as the loop
+/// can (at least once per character time on a real line).
+#[derive(Debug)]
+pub struct RtuPort<U> {
+    uart: U,
+    framer: RtuFramer,
+    tx: Frame,
+    sent: usize,
+    sending: bool,
+}
+
+impl<U: Uart> RtuPort<U> {
+    /// A port on `uart`, frames ended by `idle_ms` of silence.
+    pub fn new(uart: U, idle_ms: u32) -> Self {
+        Self {
+            uart,
+            framer: RtuFramer::new(idle_ms),
+            tx: Frame::new(),
+            sent: 0,
+            sending: false,
+        }
+    }
+
+    /// The UART.
+    pub fn uart(&mut self) -> &mut U {
+        &mut self.uart
+    }
+
+    /// `true` while a frame is being sent.
+    pub fn sending(&self) -> bool {
+        self.sending
+    }
+
+    /// Starts sending `frame` (dropped if one is still going out; a master waits for its
+    /// answer, a slave answers one request at a time, so that does not happen in use).
+    pub fn send(&mut self, frame: &[u8]) -> bool {
+        if self.sending || frame.is_empty() {
+            return false;
+        }
+        self.tx.clear();
+        if self.tx.extend_from_slice(frame).is_err() {
+            return false;
+        }
+        self.sent = 0;
+        self.sending = true;
+        self.uart.set_driver(true);
+        true
+    }
+
+    /// Moves bytes: received ones into the framer (stamped `now_ms`), queued ones out; drops
+    /// the driver once the last byte is out.
+    pub fn poll(&mut self, now_ms: u32) {
+        while let Some(b) = self.uart.try_read() {
+            if !self.sending {
+                self.framer.push(b, now_ms);
+            }
+        }
+        if self.sending {
+            while self.sent < self.tx.len() && self.uart.try_write(self.tx[self.sent]) {
+                self.sent += 1;
+            }
+            if self.sent == self.tx.len() && self.uart.tx_complete() {
+                self.sending = false;
+                self.uart.set_driver(false);
+            }
+        }
+    }
+
+    /// A complete received frame, if the line has been silent long enough.
+    pub fn receive(&mut self, now_ms: u32, out: &mut Frame) -> bool {
+        self.poll(now_ms);
+        self.framer.poll(now_ms, out)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A UART whose transmitter takes one byte per poll and echoes it (RS-485).
+    #[derive(Default)]
+    struct Loopback {
+        rx: std::collections::VecDeque<u8>,
+        wire: Vec<u8>,
+        busy: bool,
+        driver: Vec<bool>,
+    }
+
+    impl Uart for Loopback {
+        fn try_read(&mut self) -> Option<u8> {
+            self.rx.pop_front()
+        }
+        fn try_write(&mut self, b: u8) -> bool {
+            if std::mem::take(&mut self.busy) {
+                return false;
+            }
+            self.busy = true;
+            self.wire.push(b);
+            self.rx.push_back(b);
+            true
+        }
+        fn tx_complete(&mut self) -> bool {
+            !std::mem::take(&mut self.busy)
+        }
+        fn set_driver(&mut self, on: bool) {
+            self.driver.push(on);
+        }
+    }
+
+    #[test]
+    fn port_sends_half_duplex_and_frames_what_comes_back() {
+        let mut p = RtuPort::new(Loopback::default(), 2);
+        let mut out = Frame::new();
+        assert!(p.send(&[1, 2, 3]));
+        assert!(!p.send(&[9]), "one frame at a time");
+        let mut t = 0;
+        while p.sending() {
+            p.poll(t);
+            t += 1;
+            assert!(t < 20);
+        }
+        assert_eq!(p.uart().wire, [1, 2, 3]);
+        assert_eq!(p.uart().driver, [true, false]);
+        assert!(!p.receive(t + 5, &mut out), "its own echo is not a frame");
+        p.uart().rx.extend([4, 5]);
+        assert!(!p.receive(t + 6, &mut out));
+        assert!(p.receive(t + 8, &mut out));
+        assert_eq!(&out[..], &[4, 5]);
+    }
 
     #[test]
     fn a_gap_ends_a_frame() {

@@ -12,7 +12,9 @@
 #![no_main]
 
 #[cfg(all(feature = "qemu", feature = "nucleo-f446re"))]
-compile_error!("choose one board: the default (qemu) or `--no-default-features --features nucleo-f446re`");
+compile_error!(
+    "choose one board: the default (qemu) or `--no-default-features --features nucleo-f446re`"
+);
 #[cfg(not(any(feature = "qemu", feature = "nucleo-f446re")))]
 compile_error!("choose a board: `--features qemu` or `--features nucleo-f446re`");
 
@@ -32,6 +34,8 @@ mod models {
 mod nucleo;
 #[cfg(feature = "qemu")]
 mod qemu;
+#[cfg(feature = "qemu")]
+mod timing;
 
 /// Pressure model period, ms.
 const PRESSURE_MS: u32 = (models::pressure::SAMPLE_PERIOD_S * 1000.0 + 0.5) as u32;

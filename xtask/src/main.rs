@@ -1,16 +1,15 @@
 //! Project tasks, run as `cargo xtask <task>`:
 //!
-//! - `qemu`: build the firmware (release, thumbv7em-none-eabihf) and run it in QEMU
-//!   `netduinoplus2` with deterministic instruction counting (`-icount shift=0`).
-//! - `test`: everything CI checks: rustfmt, clippy `-D warnings` (host and firmware), the
-//!   no_std crates built for the MCU, the host tests, the firmware build and its size, and the
-//!   QEMU smoke run, whose samples must equal bit for bit model-core replayed on the host.
+//! - `qemu`: build the firmware for QEMU and run it on the virtual bench: a deterministic run
+//!   (`-icount`) and the timing run, or with `--scada-pty` in real time until stopped, the
+//!   SCADA slave on a pseudo-terminal.
+//! - `test`: everything CI checks: rustfmt, clippy `-D warnings` (host and both firmware
+//!   boards), the no_std crates built for the MCU, the host tests, docs, both firmware images
+//!   and their size budget, QEMU runs whose every log line must equal the same loop replayed on
+//!   the host bit for bit, the timing run, and an end-to-end test with `mbpoll` on the SCADA
+//!   port.
 //!
-//! Needs `qemu-system-arm` on the PATH for the QEMU steps (Debian: `qemu-system-arm`).
-
-use model_core::excitation::{PulseTrain, SteppedPulses};
-use model_core::narmax::fixed::NarmaxQ;
-use model_core::{Scheme, WhiteBox};
+//! Needs `qemu-system-arm` and `mbpoll` on the PATH (Debian packages of the same names).
 
 /// The firmware's NARMAX models, the very files it compiles in.
 #[path = "../../firmware/src/models/flow.rs"]
@@ -60,40 +59,75 @@ fn firmware_elf() -> PathBuf {
     target_dir.join(TARGET).join("firmware").join("firmware")
 }
 
-fn build_firmware() -> Result {
+/// The two boards the firmware builds for.
+#[derive(Clone, Copy, PartialEq)]
+enum Board {
+    Qemu,
+    Nucleo,
+}
+
+impl Board {
+    fn name(self) -> &'static str {
+        match self {
+            Board::Qemu => "qemu (STM32F405 netduinoplus2)",
+            Board::Nucleo => "nucleo-f446re",
+        }
+    }
+    fn feature_args(self) -> &'static [&'static str] {
+        match self {
+            Board::Qemu => &[],
+            Board::Nucleo => &["--no-default-features", "--features", "nucleo-f446re"],
+        }
+    }
+}
+
+fn build_firmware(board: Board) -> Result {
     run(
-        "firmware build (profile firmware: opt-level s, LTO)",
-        cargo().args([
-            "build",
-            "-p",
-            "firmware",
-            "--profile",
-            "firmware",
-            "--target",
-            TARGET,
-        ]),
+        &format!(
+            "firmware build for {} (profile firmware: opt-level s, LTO)",
+            board.name()
+        ),
+        cargo()
+            .args([
+                "build",
+                "-p",
+                "firmware",
+                "--profile",
+                "firmware",
+                "--target",
+                TARGET,
+            ])
+            .args(board.feature_args())
+            .env("DEFMT_LOG", "info"),
     )
 }
 
-/// Runs the firmware in QEMU; returns its standard output.
-fn qemu_output(elf: &Path) -> Result<String> {
+/// QEMU's command line for the firmware, with semihosting arguments `args`.
+fn qemu_command(elf: &Path, args: &[String]) -> Command {
+    let mut semihosting = String::from("enable=on,target=native,arg=firmware");
+    for a in args {
+        semihosting.push_str(",arg=");
+        semihosting.push_str(a);
+    }
+    let mut cmd = Command::new("qemu-system-arm");
+    cmd.args(["-cpu", "cortex-m4", "-machine", "netduinoplus2"])
+        .args(["-semihosting-config", &semihosting])
+        .arg("-kernel")
+        .arg(elf);
+    cmd
+}
+
+/// Runs the firmware in QEMU to its end, deterministic and faster than real time
+/// (`-icount shift=0,sleep=off`); returns its standard output.
+fn qemu_output(elf: &Path, args: &[String]) -> Result<String> {
     let start = Instant::now();
+    let mut cmd = qemu_command(elf, args);
+    cmd.args(["-nographic", "-icount", "shift=0,sleep=off"]);
     let out = Command::new("timeout")
         .arg(QEMU_TIMEOUT_S.to_string())
-        .args([
-            "qemu-system-arm",
-            "-cpu",
-            "cortex-m4",
-            "-machine",
-            "netduinoplus2",
-        ])
-        .args([
-            "-nographic",
-            "-semihosting-config",
-            "enable=on,target=native",
-        ])
-        .args(["-icount", "shift=0", "-kernel"])
-        .arg(elf)
+        .arg(cmd.get_program())
+        .args(cmd.get_args())
+        .stdin(Stdio::null())
         .stderr(Stdio::inherit())
         .output()
         .map_err(|e| {
@@ -101,7 +135,8 @@ fn qemu_output(elf: &Path) -> Result<String> {
         })?;
     let text = String::from_utf8_lossy(&out.stdout).into_owned();
     eprintln!(
-        "    qemu: {:.1} s, {}",
+        "    qemu {}: {:.1} s, {}",
+        args.join(" "),
         start.elapsed().as_secs_f64(),
         out.status
     );
@@ -126,107 +161,82 @@ fn num<T: std::str::FromStr>(line: &str, key: &str) -> Result<T> {
         .map_err(|_| format!("bad '{key}' in line: {line}"))
 }
 
-/// Checks the firmware's samples against model-core's f32 bench run on the host with the
-/// excitation the firmware announces in its first line.
-fn check_golden(output: &str) -> Result<usize> {
+/// The firmware's loop replayed on the host: the same `controller` code (App on the virtual
+/// bench, in-process drive), with the options the firmware announces in its header line.
+/// Returns the log lines it makes for the ticks `0..=run_ms`.
+fn host_replay(header: &str, run_ms: u32) -> Result<Vec<String>> {
+    use controller::app::{App, AppConfig, NarmaxModel};
+    use controller::bench::{VirtualBench, VirtualBenchConfig, VirtualIo};
+    use controller::scada::{Arithmetic, Mode};
+    let seed: u64 = num(header, "seed")?;
+    let mode = match num::<u8>(header, "mode")? {
+        0 => Mode::Stop,
+        1 => Mode::Manual,
+        _ => Mode::Profile,
+    };
+    let arithmetic = match field(header, "narmax")? {
+        "q15" => Arithmetic::Fixed,
+        _ => Arithmetic::F32,
+    };
+    let config = AppConfig {
+        initial_mode: mode,
+        initial_setpoint: num(header, "setpoint")?,
+        profile_seed: seed,
+        initial_arithmetic: arithmetic,
+        ..AppConfig::bench()
+    };
+    let e = |e: controller::app::AppError| e.to_string();
+    let ms = |s: f32| (s * 1000.0 + 0.5) as u32;
+    let p = NarmaxModel::new(
+        pressure_model::model().map_err(|e| e.to_string())?,
+        ms(pressure_model::SAMPLE_PERIOD_S),
+    )
+    .map_err(e)?;
+    let q = NarmaxModel::new(
+        flow_model::model().map_err(|e| e.to_string())?,
+        ms(flow_model::SAMPLE_PERIOD_S),
+    )
+    .map_err(e)?;
+    let mut app = App::new(config, p, q).map_err(e)?;
+    let bench =
+        VirtualBench::new(VirtualBenchConfig::default_offsets(seed)).map_err(|e| e.to_string())?;
+    let mut io = VirtualIo::new(bench, config.vfd).ok_or("bad VFD map")?;
+    let mut lines = vec![];
+    for _ in 0..=run_ms {
+        if let Some(log) = app.tick(&mut io) {
+            let mut text = String::new();
+            log.write_text(&mut text).map_err(|e| e.to_string())?;
+            lines.push(text);
+        }
+        io.step_1ms().map_err(|e| e.to_string())?;
+    }
+    Ok(lines)
+}
+
+/// Checks the firmware's log lines against the host replay, text and f32 bits.
+fn check_golden(output: &str, run_ms: u32) -> Result<usize> {
     let header = output
         .lines()
         .find(|l| l.starts_with("firmware:"))
         .ok_or("no 'firmware:' header line")?;
-    let step_ms: u32 = num(header, "step_ms")?;
-    let seed: u64 = num(header, "seed")?;
-    let duration_ms: u32 = num(header, "duration_ms")?;
-    let mut samples = std::collections::BTreeMap::new();
-    let mut narmax_lines = std::collections::BTreeMap::new();
-    for line in output.lines() {
-        let into = if line.starts_with("sample ") {
-            &mut samples
-        } else if line.starts_with("narmax ") {
-            &mut narmax_lines
-        } else {
-            continue;
-        };
-        let t: u32 = num(line, "t_ms")?;
-        into.insert(t, field(line, "bits")?.to_string());
-    }
     if !output.lines().any(|l| l == "done") {
         return Err("the firmware did not print 'done'".into());
     }
-    let bench = WhiteBox::<f32>::paper();
-    let e = |e: model_core::narmax::NarmaxError| e.to_string();
-    let (p_f32, f_f32) = (
-        pressure_model::model().map_err(e)?,
-        flow_model::model().map_err(e)?,
-    );
-    let (p_q15, f_q15) = (
-        NarmaxQ::quantize(&p_f32).map_err(e)?,
-        NarmaxQ::quantize(&f_f32).map_err(e)?,
-    );
-    let p_ms = (pressure_model::SAMPLE_PERIOD_S * 1000.0 + 0.5) as u32;
-    let f_ms = (flow_model::SAMPLE_PERIOD_S * 1000.0 + 0.5) as u32;
-    let mut schedule = SteppedPulses::new(PulseTrain::paper(seed), step_ms).peekable();
-    let u0 = schedule.peek().map_or(0.0, |&(_, u)| u as f32);
-    let st = &mut bench.steady_state(u0).map_err(|e| e.to_string())?;
-    let s0 = bench.signals(st);
-    let p_st = &mut p_f32.state_at(u0, s0.pressure_mca);
-    let pq_st = &mut p_q15.state_at(u0, s0.pressure_mca);
-    let f_st = &mut f_f32.state_at(u0, s0.flow_lps);
-    let fq_st = &mut f_q15.state_at(u0, s0.flow_lps);
-    let (mut p, mut pq, mut f, mut fq) = (0.0f32, 0.0f32, 0.0f32, 0.0f32);
-    let mut checked = 0;
-    for (t_ms, torque) in schedule {
-        if t_ms > duration_ms {
-            break;
-        }
-        let u = torque as f32;
-        if t_ms % p_ms == 0 {
-            p = p_f32.simulate_step(p_st, u).y;
-            pq = p_q15.simulate_step(pq_st, u).y;
-        }
-        if t_ms % f_ms == 0 {
-            f = f_f32.simulate_step(f_st, u).y;
-            fq = f_q15.simulate_step(fq_st, u).y;
-        }
-        if let Some(bits) = narmax_lines.get(&t_ms) {
-            let host = format!(
-                "{:08x},{:08x},{:08x},{:08x}",
-                p.to_bits(),
-                pq.to_bits(),
-                f.to_bits(),
-                fq.to_bits()
-            );
-            if *bits != host {
-                return Err(format!(
-                    "t_ms={t_ms}: firmware NARMAX bits {bits}, host bits {host} (pressure {p} {pq}, flow {f} {fq})"
-                ));
-            }
-            checked += 1;
-        }
-        if let Some(bits) = samples.get(&t_ms) {
-            let s = bench.signals(st);
-            let host = format!(
-                "{:08x},{:08x},{:08x}",
-                s.speed_rpm.to_bits(),
-                s.flow_lps.to_bits(),
-                s.pressure_mca.to_bits()
-            );
-            if *bits != host {
-                return Err(format!(
-                    "t_ms={t_ms}: firmware bits {bits}, host f32 bits {host} (speed {} flow {} pressure {})",
-                    s.speed_rpm, s.flow_lps, s.pressure_mca
-                ));
-            }
-            checked += 1;
-        }
-        bench
-            .step(st, u, step_ms as f32 * 1e-3, Scheme::Rk4)
-            .map_err(|e| e.to_string())?;
+    let target: Vec<&str> = output.lines().filter(|l| l.starts_with("t_s=")).collect();
+    let host = host_replay(header, run_ms)?;
+    if target.len() != host.len() || target.is_empty() {
+        return Err(format!(
+            "the firmware logged {} lines, the host replay {}",
+            target.len(),
+            host.len()
+        ));
     }
-    let total = samples.len() + narmax_lines.len();
-    if checked != total || checked == 0 {
-        return Err(format!("checked {checked} of {total} lines"));
+    for (t, h) in target.iter().zip(&host) {
+        if t != h {
+            return Err(format!("firmware: {t}\nhost:     {h}"));
+        }
     }
-    Ok(checked)
+    Ok(target.len())
 }
 
 fn llvm_size() -> Option<PathBuf> {
@@ -243,40 +253,316 @@ fn llvm_size() -> Option<PathBuf> {
     p.exists().then_some(p)
 }
 
-fn print_size(elf: &Path) -> Result {
-    match llvm_size() {
-        Some(tool) => run("firmware size (llvm-size)", Command::new(tool).arg(elf)),
-        None => {
-            eprintln!("    llvm-size not found (rustup component add llvm-tools); skipped");
-            Ok(())
-        }
-    }
-}
+/// Flash and static RAM budget of an image, bytes (the issue's: 64 KiB and 16 KiB).
+const FLASH_BUDGET: u64 = 64 * 1024;
+const RAM_BUDGET: u64 = 16 * 1024;
 
-fn qemu() -> Result {
-    build_firmware()?;
-    let out = qemu_output(&firmware_elf())?;
-    print!("{out}");
-    let ticks: f64 = out
-        .lines()
-        .find(|l| l.starts_with("timing "))
-        .map(|l| num(l, "systick_ticks_per_step"))
-        .transpose()?
-        .unwrap_or(0.0);
-    // -icount shift=0: 1 instruction = 1 ns; SysTick counts at 168 MHz.
+/// Prints `llvm-size` of the ELF and checks it against the budget.
+fn check_size(elf: &Path, board: Board) -> Result {
+    let tool = llvm_size().ok_or("llvm-size not found (rustup component add llvm-tools)")?;
+    let out = Command::new(tool)
+        .arg(elf)
+        .output()
+        .map_err(|e| format!("llvm-size: {e}"))?;
+    let text = String::from_utf8_lossy(&out.stdout);
+    print!("{} image:\n{text}", board.name());
+    let row = text.lines().nth(1).ok_or("llvm-size printed nothing")?;
+    let v: Vec<u64> = row
+        .split_whitespace()
+        .take(3)
+        .map(|x| x.parse().map_err(|_| format!("llvm-size row: {row}")))
+        .collect::<Result<_>>()?;
+    let (flash, ram) = (v[0] + v[1], v[1] + v[2]);
     println!(
-        "≈ {:.0} instructions per RK4 step (SysTick ticks / 0.168 under -icount shift=0)",
-        ticks / 0.168
+        "    flash {flash} B of {FLASH_BUDGET} ({:.0} %), static RAM {ram} B of {RAM_BUDGET}",
+        100.0 * flash as f64 / FLASH_BUDGET as f64
     );
-    if let Some(l) = out.lines().find(|l| l.starts_with("timing narmax")) {
-        let mut parts = vec![];
-        for key in ["pressure_f32", "pressure_q15", "flow_f32", "flow_q15"] {
-            let t: f64 = num(l, key)?;
-            parts.push(format!("{key} ≈ {:.0}", t / 0.168));
-        }
-        println!("instructions per NARMAX step: {}", parts.join(", "));
+    if flash > FLASH_BUDGET || ram > RAM_BUDGET {
+        return Err(format!("{} image over budget", board.name()));
     }
     Ok(())
+}
+
+/// The figures of a timing run, in SysTick ticks and instructions.
+fn print_timing(out: &str) -> Result {
+    // -icount shift=0: 1 instruction = 1 ns; SysTick counts at 168 MHz.
+    let ins = |t: f64| t / 0.168;
+    for line in out.lines().filter(|l| l.starts_with("timing ")) {
+        println!("{line}");
+    }
+    let line = |p: &str| {
+        out.lines()
+            .find(|l| l.starts_with(p))
+            .ok_or_else(|| format!("no '{p}' line"))
+    };
+    let l = line("timing loop")?;
+    let (mean, max): (f64, f64) = (num(l, "mean")?, num(l, "max")?);
+    println!(
+        "≈ instructions per 1 ms tick: mean {:.0}, max {:.0} (of 168 000 at 168 MHz: {:.2} % / {:.1} %)",
+        ins(mean),
+        ins(max),
+        100.0 * ins(mean) / 168_000.0,
+        100.0 * ins(max) / 168_000.0
+    );
+    let rk4: f64 = num(line("timing rk4")?, "systick_ticks_per_step")?;
+    println!("≈ instructions per RK4 step: {:.0}", ins(rk4));
+    let l = line("timing narmax")?;
+    let mut parts = vec![];
+    for key in ["pressure_f32", "pressure_q15", "flow_f32", "flow_q15"] {
+        let t: f64 = num(l, key)?;
+        parts.push(format!("{key} ≈ {:.0}", ins(t)));
+    }
+    println!("instructions per NARMAX step: {}", parts.join(", "));
+    Ok(())
+}
+
+/// Options of `cargo xtask qemu`.
+struct QemuOptions {
+    scada_pty: bool,
+    vfd: Option<String>,
+    seconds: u32,
+    firmware_args: Vec<String>,
+}
+
+fn parse_qemu_options(args: &[String]) -> Result<QemuOptions> {
+    let mut o = QemuOptions {
+        scada_pty: false,
+        vfd: None,
+        seconds: 20,
+        firmware_args: vec![],
+    };
+    let mut it = args.iter();
+    while let Some(a) = it.next() {
+        let mut value = |name: &str| {
+            it.next()
+                .cloned()
+                .ok_or_else(|| format!("{name} needs a value"))
+        };
+        match a.as_str() {
+            "--scada-pty" => o.scada_pty = true,
+            "--vfd" => o.vfd = Some(value("--vfd")?),
+            "--seconds" => {
+                o.seconds = value("--seconds")?
+                    .parse()
+                    .map_err(|_| "--seconds takes a whole number")?
+            }
+            "--mode" => o.firmware_args.push(format!("mode={}", value("--mode")?)),
+            "--setpoint" => o
+                .firmware_args
+                .push(format!("setpoint={}", value("--setpoint")?)),
+            "--seed" => o.firmware_args.push(format!("seed={}", value("--seed")?)),
+            "--narmax" => o
+                .firmware_args
+                .push(format!("narmax={}", value("--narmax")?)),
+            other => return Err(format!("unknown option '{other}'\n{QEMU_USAGE}")),
+        }
+    }
+    Ok(o)
+}
+
+const QEMU_USAGE: &str = "usage: cargo xtask qemu [--scada-pty] [--vfd PTY] [--seconds N] [--mode 0|1|2] [--setpoint 0..10000] [--seed N] [--narmax f32|q15]
+  (no --scada-pty)  run the virtual bench for --seconds (default 20) of loop time, mode 2 (the
+                    paper's excitation) unless --mode says otherwise, deterministic and faster
+                    than real time (-icount), then the timing run
+  --scada-pty       real time, until stopped (Ctrl-C): the SCADA slave (unit 1, 19200 8N1 RTU)
+                    on a pseudo-terminal; QEMU prints its path. Starts stopped (mode 0).
+  --vfd PTY         the VFD master on USART2 to that serial device (e.g. pumpbench vfd-sim's)";
+
+fn qemu(args: &[String]) -> Result {
+    let o = parse_qemu_options(args)?;
+    build_firmware(Board::Qemu)?;
+    let elf = firmware_elf();
+    let mut fw_args = o.firmware_args.clone();
+    if o.vfd.is_some() {
+        fw_args.push("vfd=uart".into());
+    }
+    if o.scada_pty || o.vfd.is_some() {
+        let mut cmd = qemu_command(&elf, &fw_args);
+        cmd.args(["-display", "none", "-monitor", "none"]);
+        cmd.args(["-serial", if o.scada_pty { "pty" } else { "null" }]);
+        cmd.arg("-serial");
+        cmd.arg(o.vfd.as_deref().unwrap_or("null"));
+        eprintln!("==> qemu (real time, until stopped: Ctrl-C)");
+        let status = cmd
+            .status()
+            .map_err(|e| format!("cannot start qemu-system-arm: {e}"))?;
+        return if status.success() {
+            Ok(())
+        } else {
+            Err(format!("qemu: {status}"))
+        };
+    }
+    if !fw_args.iter().any(|a| a.starts_with("mode=")) {
+        fw_args.push("mode=2".into());
+    }
+    fw_args.push(format!("run_ms={}", o.seconds * 1000 + 1));
+    print!("{}", qemu_output(&elf, &fw_args)?);
+    fw_args.push("timing".into());
+    print_timing(&qemu_output(&elf, &fw_args)?)
+}
+
+/// The end-to-end check: the firmware in QEMU in real time with its SCADA port on a
+/// pseudo-terminal, driven by `mbpoll` (another Modbus implementation, libmodbus).
+mod e2e {
+    use super::{qemu_command, Result};
+    use std::io::{BufRead, BufReader, Write};
+    use std::path::Path;
+    use std::process::{Child, Command, Stdio};
+    use std::time::{Duration, Instant};
+
+    /// QEMU, killed when dropped.
+    struct Qemu(Child);
+    impl Drop for Qemu {
+        fn drop(&mut self) {
+            let _ = self.0.kill();
+            let _ = self.0.wait();
+        }
+    }
+
+    /// `mbpoll` in RTU mode (19200 8N1, 1 s timeout, one poll): `args`, the port, `values`.
+    fn mbpoll(pty: &str, args: &[&str], values: &[&str]) -> Result<String> {
+        let out = Command::new("mbpoll")
+            .args(["-m", "rtu", "-b", "19200", "-P", "none", "-o", "1", "-1"])
+            .args(args)
+            .arg(pty)
+            .args(values)
+            .output()
+            .map_err(|e| format!("cannot run mbpoll (apt-get install mbpoll): {e}"))?;
+        let mut text = String::from_utf8_lossy(&out.stdout).into_owned();
+        text.push_str(&String::from_utf8_lossy(&out.stderr));
+        Ok(text)
+    }
+
+    /// Registers `[n]: value` from an mbpoll read (1-based references as mbpoll prints them).
+    fn registers(text: &str, first: usize, count: usize) -> Result<Vec<i64>> {
+        (first..first + count)
+            .map(|r| {
+                let key = format!("[{r}]:");
+                text.lines()
+                    .find_map(|l| l.trim().strip_prefix(&key))
+                    .and_then(|v| v.split_whitespace().next()?.parse().ok())
+                    .ok_or_else(|| format!("register {r} not in mbpoll's answer:\n{text}"))
+            })
+            .collect()
+    }
+
+    pub fn run(elf: &Path) -> Result<String> {
+        let mut cmd = qemu_command(elf, &["mode=0".into()]);
+        cmd.args(["-display", "none", "-monitor", "none"])
+            .args(["-serial", "pty", "-serial", "null"])
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped());
+        let mut child = cmd
+            .spawn()
+            .map_err(|e| format!("cannot start qemu-system-arm: {e}"))?;
+        let stderr = child.stderr.take().ok_or("no stderr")?;
+        let stdout = child.stdout.take().ok_or("no stdout")?;
+        let qemu = Qemu(child);
+        // QEMU names the pty on stderr; the firmware logs on stdout (semihosting).
+        let (tx, rx) = std::sync::mpsc::channel();
+        let tx2 = tx.clone();
+        std::thread::spawn(move || {
+            for line in BufReader::new(stderr).lines().map_while(|l| l.ok()) {
+                let _ = tx.send(line);
+            }
+        });
+        std::thread::spawn(move || {
+            for line in BufReader::new(stdout).lines().map_while(|l| l.ok()) {
+                let _ = tx2.send(line);
+            }
+        });
+        let deadline = Instant::now() + Duration::from_secs(20);
+        let mut pty = None;
+        let mut started = false;
+        while pty.is_none() || !started {
+            let left = deadline.saturating_duration_since(Instant::now());
+            let line = rx
+                .recv_timeout(left)
+                .map_err(|_| "QEMU did not announce its pty and the firmware's start")?;
+            if let Some(rest) = line.strip_prefix("char device redirected to ") {
+                pty = rest.split_whitespace().next().map(str::to_string);
+            }
+            started |= line.starts_with("firmware:");
+        }
+        let pty = pty.ok_or("no pty")?;
+        let mut report = format!("SCADA on {pty}\n");
+
+        // Read all input registers (FC 04).
+        let read = |report: &mut String| -> Result<Vec<i64>> {
+            let t = mbpoll(&pty, &["-a", "1", "-t", "3", "-r", "1", "-c", "18"], &[])?;
+            let r = registers(&t, 1, 18)?;
+            report.push_str(&format!("inputs: {r:?}\n"));
+            Ok(r)
+        };
+        let r0 = read(&mut report)?;
+        if r0[1] != 0 || r0[0] & 1 != 0 {
+            return Err(format!("stopped at start expected, read {r0:?}"));
+        }
+        // Setpoint 50 % and manual mode (FC 16 of two holding registers).
+        let w = mbpoll(&pty, &["-a", "1", "-t", "4", "-r", "1"], &["5000", "1"])?;
+        if !w.contains("Written 2 references") {
+            return Err(format!("write setpoint and mode: {w}"));
+        }
+        std::thread::sleep(Duration::from_secs(3));
+        let r = read(&mut report)?;
+        let bench = model_core::WhiteBox::<f32>::paper();
+        let op = bench.signals(&bench.steady_state(50.0).map_err(|e| e.to_string())?);
+        let speed = r[6] as f64 / 10.0;
+        let pressure = (r[2] as i16) as f64 / 1000.0;
+        let flow = r[3] as f64 / 100.0;
+        let rel = |a: f64, b: f32| (a / b as f64 - 1.0).abs();
+        report.push_str(&format!(
+            "after 3 s at 50 %: white-box speed {speed} rpm (model {:.1}), measured pressure {pressure} mca (model {:.3}), flow {flow} l/s (model {:.2})\n",
+            op.speed_rpm, op.pressure_mca, op.flow_lps
+        ));
+        if r[1] != 5000
+            || rel(speed, op.speed_rpm) > 0.01
+            || rel(pressure, op.pressure_mca) > 0.05
+            || rel(flow, op.flow_lps) > 0.05
+            || r[0] & 0b1011 != 0b1001
+        {
+            return Err(format!("operating point at 50 % not reached:\n{report}"));
+        }
+        // Spec exceptions.
+        let t = mbpoll(&pty, &["-a", "1", "-t", "3", "-r", "19", "-c", "1"], &[])?;
+        if !t.to_lowercase().contains("illegal data address") {
+            return Err(format!(
+                "input register 18: expected exception 02, got:\n{t}"
+            ));
+        }
+        let t = mbpoll(&pty, &["-a", "1", "-t", "4", "-r", "1"], &["10001"])?;
+        if !t.to_lowercase().contains("illegal data value") {
+            return Err(format!("setpoint 10001: expected exception 03, got:\n{t}"));
+        }
+        report.push_str(
+            "exceptions 02 (input register 18) and 03 (setpoint 10001): as the spec says\n",
+        );
+        // Malformed frames: bad CRC, another unit; silence, then a valid request is answered.
+        {
+            let mut port = std::fs::OpenOptions::new()
+                .read(true)
+                .write(true)
+                .open(&pty)
+                .map_err(|e| format!("{pty}: {e}"))?;
+            port.write_all(&[1, 4, 0, 0, 0, 1, 0xDE, 0xAD])
+                .map_err(|e| e.to_string())?;
+            std::thread::sleep(Duration::from_millis(300));
+        }
+        let t = mbpoll(&pty, &["-a", "2", "-t", "3", "-r", "1", "-c", "1"], &[])?;
+        if !t.to_lowercase().contains("timed out") {
+            return Err(format!("a request for unit 2 must get silence, got:\n{t}"));
+        }
+        let r2 = read(&mut report)?;
+        if r2[1] != 5000 {
+            return Err(format!(
+                "the slave must still answer after malformed frames: {r2:?}"
+            ));
+        }
+        report.push_str("bad CRC and unit 2: silence; the next request answered\n");
+        drop(qemu);
+        Ok(report)
+    }
 }
 
 fn test() -> Result {
@@ -286,12 +572,15 @@ fn test() -> Result {
         "clippy (host)",
         cargo().args(["clippy", "--all-targets", "--", "-D", "warnings"]),
     )?;
-    run(
-        "clippy (firmware)",
-        cargo().args([
-            "clippy", "-p", "firmware", "--target", TARGET, "--", "-D", "warnings",
-        ]),
-    )?;
+    for board in [Board::Qemu, Board::Nucleo] {
+        run(
+            &format!("clippy (firmware, {})", board.name()),
+            cargo()
+                .args(["clippy", "-p", "firmware", "--target", TARGET])
+                .args(board.feature_args())
+                .args(["--", "-D", "warnings"]),
+        )?;
+    }
     run(
         "no_std crates build for the MCU (model-core, controller)",
         cargo().args([
@@ -306,20 +595,33 @@ fn test() -> Result {
     )?;
     run("host tests", cargo().args(["test"]))?;
     run(
-        "doc (model-core, warnings denied)",
+        "doc (model-core, controller, warnings denied)",
         cargo()
-            .args(["doc", "--no-deps", "-p", "model-core"])
+            .args(["doc", "--no-deps", "-p", "model-core", "-p", "controller"])
             .env("RUSTDOCFLAGS", "-D warnings"),
     )?;
-    build_firmware()?;
     let elf = firmware_elf();
-    print_size(&elf)?;
-    eprintln!("==> QEMU smoke run (netduinoplus2, -icount shift=0)");
-    let out = qemu_output(&elf)?;
-    let n = check_golden(&out)?;
-    println!(
-        "QEMU smoke run: {n} lines (white-box, NARMAX f32 and fixed point) equal model-core on the host, bit for bit"
-    );
+    build_firmware(Board::Nucleo)?;
+    check_size(&elf, Board::Nucleo)?;
+    build_firmware(Board::Qemu)?;
+    check_size(&elf, Board::Qemu)?;
+    eprintln!("==> QEMU runs against the host replay (netduinoplus2, -icount shift=0,sleep=off)");
+    const RUN_MS: u32 = 20_000;
+    for narmax in ["f32", "q15"] {
+        let args = [
+            "mode=2".to_string(),
+            format!("narmax={narmax}"),
+            format!("run_ms={}", RUN_MS + 1),
+        ];
+        let out = qemu_output(&elf, &args)?;
+        let n = check_golden(&out, RUN_MS)?;
+        println!(
+            "QEMU run, NARMAX {narmax}: {n} log lines (white-box, measured, NARMAX, residuals) equal the host replay, bit for bit"
+        );
+    }
+    print_timing(&qemu_output(&elf, &["mode=2".into(), "timing".into()])?)?;
+    eprintln!("==> end to end: QEMU in real time, SCADA on a pty, mbpoll as the client");
+    print!("{}", e2e::run(&elf)?);
     eprintln!(
         "all checks passed in {:.0} s",
         start.elapsed().as_secs_f64()
@@ -328,11 +630,15 @@ fn test() -> Result {
 }
 
 fn main() -> ExitCode {
-    let task = std::env::args().nth(1);
-    let result = match task.as_deref() {
-        Some("qemu") => qemu(),
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let result = match args.first().map(String::as_str) {
+        Some("qemu") => qemu(&args[1..]),
         Some("test") => test(),
-        _ => Err("usage: cargo xtask <qemu|test>\n  qemu  build the firmware and run it in QEMU\n  test  fmt, clippy, tests, firmware build and size, QEMU smoke run".into()),
+        Some("e2e") => build_firmware(Board::Qemu).and_then(|()| {
+            print!("{}", e2e::run(&firmware_elf())?);
+            Ok(())
+        }),
+        _ => Err(format!("usage: cargo xtask <qemu|test>\n  qemu  build the firmware and run it in QEMU on the virtual bench\n  test  fmt, clippy, tests, both firmware images and their size, QEMU runs against the host, mbpoll end to end\n{QEMU_USAGE}")),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,0 +1,304 @@
+//! QEMU `netduinoplus2` (STM32F405) glue: the virtual bench on-chip.
+//!
+//! - The transmitters, the torque output and the drive are
+//!   [`controller::bench::VirtualIo`]: the white-box bench a few percent off the model,
+//!   transmitter lag, noise and 12-bit ADC codes fed to the same scaling and fault checks as
+//!   on a board. QEMU models no usable ADC (the HAL's `Adc::new` faults) and no DAC.
+//! - SCADA: Modbus RTU slave on USART1 (QEMU's first `-serial`).
+//! - VFD: by default the virtual drive answers in-process; with the argument `vfd=uart` the
+//!   master talks on USART2 (the second `-serial`), e.g. to `pumpbench vfd-sim`.
+//! - SysTick paces the loop at 1 ms (QEMU clocks it at 168 MHz whatever the RCC says; the RCC
+//!   is left on HSI, as a PLL-ready wait would hang). Between ticks the core sleeps (`wfi`),
+//!   so `-icount shift=0,sleep=off` runs the loop faster than real time and deterministically.
+//! - Logs: one text line a second over semihosting (no float formatting: see
+//!   [`controller::app::write_fixed`]).
+//!
+//! Arguments, read with semihosting `SYS_GET_CMDLINE` (QEMU: `-semihosting-config
+//! enable=on,target=native,arg=firmware,arg=mode=2,…`), each `key=value`:
+//! `mode=0|1|2` (start-up mode, default 0 stop), `setpoint=0..10000` (0.01 %), `seed=N`
+//! (profile seed, default 1), `narmax=f32|q15` (NARMAX arithmetic), `run_ms=N` (exit 0 after N ms; default: run until QEMU is
+//! stopped), `vfd=uart`, `timing` (measure the loop and the models, print, exit). A bad
+//! argument is reported and the firmware exits with status 1.
+
+use crate::{now_ms, serve, start_systick, Board};
+use controller::app::{AppConfig, Io, LogLine};
+use controller::bench::{VirtualBench, VirtualBenchConfig, VirtualIo};
+use controller::rtu::{Frame, RtuPort, Uart};
+use controller::scada::{Arithmetic, Mode};
+use core::fmt::Write as _;
+use cortex_m_semihosting::{debug, hio};
+use panic_semihosting as _;
+use stm32f4xx_hal::pac;
+
+/// SysTick under QEMU, Hz.
+const QEMU_SYSTICK_HZ: u32 = 168_000_000;
+/// HSI: the USART clock with the RCC untouched, Hz.
+const HSI_HZ: u32 = 16_000_000;
+/// Line speed, baud (QEMU's serial back-ends ignore it; a board uses it).
+const BAUD: u32 = 19_200;
+/// Silence that ends an RTU frame under QEMU, ms: QEMU hands over one byte each time the guest
+/// reads the last one, with no line timing, and a busy host can delay a byte by a few
+/// milliseconds; 10 ms keeps frames whole and is far below any master's timeout.
+const QEMU_IDLE_MS: u32 = 10;
+
+/// A polled USART (QEMU's STM32F2xx USART model: a byte in DR, RXNE, TXE/TC always ready).
+struct Usart(&'static pac::usart1::RegisterBlock);
+
+impl Usart {
+    fn new(regs: &'static pac::usart1::RegisterBlock, pclk_hz: u32) -> Self {
+        let brr = (pclk_hz + BAUD / 2) / BAUD;
+        // SAFETY: BRR takes any 16-bit divider; this is the HAL's own computation.
+        regs.brr().write(|w| unsafe { w.bits(brr as u16) });
+        regs.cr1()
+            .write(|w| w.ue().set_bit().te().set_bit().re().set_bit());
+        Self(regs)
+    }
+}
+
+impl Uart for Usart {
+    fn try_read(&mut self) -> Option<u8> {
+        self.0
+            .sr()
+            .read()
+            .rxne()
+            .bit_is_set()
+            .then(|| self.0.dr().read().dr().bits() as u8)
+    }
+    fn try_write(&mut self, byte: u8) -> bool {
+        if self.0.sr().read().txe().bit_is_clear() {
+            return false;
+        }
+        self.0.dr().write(|w| w.dr().set(u16::from(byte)));
+        true
+    }
+    fn tx_complete(&mut self) -> bool {
+        self.0.sr().read().tc().bit_is_set()
+    }
+}
+
+/// Start-up options from the semihosting command line.
+struct Args {
+    mode: Mode,
+    setpoint: u16,
+    seed: u64,
+    run_ms: Option<u32>,
+    vfd_uart: bool,
+    timing: bool,
+    arithmetic: Arithmetic,
+}
+
+fn parse_args(line: &str) -> Result<Args, &str> {
+    let mut a = Args {
+        mode: Mode::Stop,
+        setpoint: 0,
+        seed: 1,
+        run_ms: None,
+        vfd_uart: false,
+        timing: false,
+        arithmetic: Arithmetic::F32,
+    };
+    // The first word is the program name.
+    for word in line.split_whitespace().skip(1) {
+        let (key, value) = word.split_once('=').unwrap_or((word, ""));
+        let number = || value.parse::<u64>().map_err(|_| word);
+        match key {
+            "mode" => {
+                a.mode = match value {
+                    "0" => Mode::Stop,
+                    "1" => Mode::Manual,
+                    "2" => Mode::Profile,
+                    _ => return Err(word),
+                }
+            }
+            "setpoint" => a.setpoint = u16::try_from(number()?).map_err(|_| word)?,
+            "seed" => a.seed = number()?,
+            "run_ms" => a.run_ms = Some(u32::try_from(number()?).map_err(|_| word)?),
+            "vfd" if value == "uart" => a.vfd_uart = true,
+            "narmax" if value == "f32" => a.arithmetic = Arithmetic::F32,
+            "narmax" if value == "q15" => a.arithmetic = Arithmetic::Fixed,
+            "timing" if value.is_empty() => a.timing = true,
+            _ => return Err(word),
+        }
+    }
+    Ok(a)
+}
+
+/// The semihosting command line into `buf`; empty if the host gives none.
+fn command_line(buf: &mut [u8]) -> &str {
+    let mut block = [buf.as_mut_ptr() as usize, buf.len()];
+    // SAFETY: SYS_GET_CMDLINE writes at most `block[1]` bytes to `block[0]`, a live buffer,
+    // and the length it wrote back to `block[1]`.
+    let failed = unsafe {
+        cortex_m_semihosting::syscall1(
+            cortex_m_semihosting::nr::GET_CMDLINE,
+            core::ptr::addr_of_mut!(block) as usize,
+        )
+    } != 0;
+    let n = if failed { 0 } else { block[1].min(buf.len()) };
+    // The line is NUL-terminated; QEMU 7.2 reports the buffer's length, not the line's.
+    let n = buf[..n].iter().position(|&b| b == 0).unwrap_or(n);
+    core::str::from_utf8(&buf[..n]).unwrap_or("")
+}
+
+/// The virtual bench as the board.
+struct QemuBoard {
+    virt: VirtualIo,
+    vfd_port: Option<RtuPort<Usart>>,
+    out: hio::HostStream,
+    run_ms: Option<u32>,
+    failed: bool,
+}
+
+impl Io for QemuBoard {
+    fn pressure_code(&mut self) -> u16 {
+        self.virt.pressure_code()
+    }
+    fn flow_code(&mut self) -> u16 {
+        self.virt.flow_code()
+    }
+    fn set_torque_ref(&mut self, pct: f32) {
+        self.virt.set_torque_ref(pct);
+    }
+    fn vfd_send(&mut self, frame: &[u8]) {
+        match &mut self.vfd_port {
+            Some(port) => {
+                port.send(frame);
+            }
+            None => self.virt.vfd_send(frame),
+        }
+    }
+    fn vfd_receive(&mut self, now_ms: u32, frame: &mut Frame) -> bool {
+        match &mut self.vfd_port {
+            Some(port) => port.receive(now_ms, frame),
+            None => self.virt.vfd_receive(now_ms, frame),
+        }
+    }
+}
+
+impl Board for QemuBoard {
+    fn poll(&mut self, now_ms: u32) {
+        if let Some(port) = &mut self.vfd_port {
+            port.poll(now_ms);
+        }
+    }
+
+    fn after_tick(&mut self, log: Option<&LogLine>) -> bool {
+        if self.virt.step_1ms().is_err() {
+            let _ = writeln!(self.out, "error: the virtual bench diverged");
+            self.failed = true;
+            return false;
+        }
+        if let Some(line) = log {
+            let _ = line.write_text(&mut self.out);
+            let _ = writeln!(self.out);
+        }
+        match self.run_ms {
+            Some(end) => now_ms() < end,
+            None => true,
+        }
+    }
+
+    fn idle(&mut self) {
+        cortex_m::asm::wfi();
+    }
+}
+
+/// Sets up the virtual bench and runs the loop; exits QEMU at the end of `run_ms`.
+pub fn run() -> ! {
+    let code = match hio::hstdout() {
+        Ok(mut out) => match start(&mut out) {
+            Ok(()) => debug::EXIT_SUCCESS,
+            Err(()) => debug::EXIT_FAILURE,
+        },
+        Err(()) => debug::EXIT_FAILURE,
+    };
+    debug::exit(code);
+    #[allow(clippy::empty_loop)]
+    loop {}
+}
+
+fn start(out: &mut hio::HostStream) -> Result<(), ()> {
+    let mut buf = [0u8; 256];
+    let args = match parse_args(command_line(&mut buf)) {
+        Ok(a) => a,
+        Err(word) => {
+            let _ = writeln!(
+                out,
+                "error: bad argument '{word}' (see firmware/src/qemu.rs)"
+            );
+            return Err(());
+        }
+    };
+    let config = AppConfig {
+        initial_mode: args.mode,
+        initial_setpoint: args.setpoint,
+        profile_seed: args.seed,
+        initial_arithmetic: args.arithmetic,
+        ..AppConfig::bench()
+    };
+    let fail = |out: &mut hio::HostStream, e: &dyn core::fmt::Display| {
+        let _ = writeln!(out, "error: {e}");
+    };
+    let mut app = match crate::build_loop(config) {
+        Ok(app) => app,
+        Err(e) => {
+            fail(out, &e);
+            return Err(());
+        }
+    };
+    let bench = match VirtualBench::new(VirtualBenchConfig::default_offsets(args.seed)) {
+        Ok(b) => b,
+        Err(e) => {
+            fail(out, &e);
+            return Err(());
+        }
+    };
+    let virt = VirtualIo::new(bench, config.vfd).ok_or(())?;
+    let cp = cortex_m::Peripherals::take().ok_or(())?;
+    if args.timing {
+        return crate::timing::report(cp.SYST, &mut app, virt, out).map_err(|_| ());
+    }
+    let dp = pac::Peripherals::take().ok_or(())?;
+    dp.RCC.apb2enr().modify(|_, w| w.usart1en().set_bit());
+    dp.RCC.apb1enr().modify(|_, w| w.usart2en().set_bit());
+    // SAFETY (both): the register blocks live at fixed addresses for the whole program, and
+    // each is used by exactly one `Usart` from here on.
+    let usart1: &'static pac::usart1::RegisterBlock = unsafe { &*pac::USART1::ptr() };
+    let usart2: &'static pac::usart1::RegisterBlock = unsafe { &*pac::USART2::ptr() };
+    let mut scada = RtuPort::new(Usart::new(usart1, HSI_HZ), QEMU_IDLE_MS);
+    let vfd_port = args
+        .vfd_uart
+        .then(|| RtuPort::new(Usart::new(usart2, HSI_HZ), QEMU_IDLE_MS));
+    let _ = writeln!(
+        out,
+        "firmware: virtual bench, SCADA unit 1 on USART1, VFD {}, mode={} setpoint={} seed={} narmax={}{}",
+        if args.vfd_uart {
+            "on USART2"
+        } else {
+            "virtual"
+        },
+        args.mode as u8,
+        args.setpoint,
+        args.seed,
+        match args.arithmetic {
+            Arithmetic::F32 => "f32",
+            Arithmetic::Fixed => "q15",
+        },
+        if args.run_ms.is_some() { "" } else { ", runs until stopped" }
+    );
+    let mut board = QemuBoard {
+        virt,
+        vfd_port,
+        out: *out,
+        run_ms: args.run_ms,
+        failed: false,
+    };
+    start_systick(cp.SYST, QEMU_SYSTICK_HZ);
+    serve(&mut app, &mut scada, &mut board);
+    let _ = writeln!(out, "done");
+    if board.failed {
+        Err(())
+    } else {
+        Ok(())
+    }
+}

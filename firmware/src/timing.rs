@@ -1,0 +1,112 @@
+//! Cost of the loop and of each model step on the target, in SysTick ticks (168 MHz under
+//! QEMU; with `-icount shift=0` one instruction is 1 ns, so instructions = ticks / 0.168).
+//! QEMU has no cycle model and no DWT counter: these are instruction counts, not cycles.
+
+use crate::{models, Loop};
+use controller::app::Io;
+use controller::bench::VirtualIo;
+use core::fmt::Write;
+use cortex_m::peripheral::{syst::SystClkSource, SYST};
+use model_core::narmax::fixed::NarmaxQ;
+use model_core::{Scheme, WhiteBox};
+
+/// SysTick's 24-bit counter mask.
+const SYST_MASK: u32 = 0x00FF_FFFF;
+/// Loop time measured, ms.
+const LOOP_MS: u32 = 20_000;
+/// Calls per model measured.
+const MODEL_CALLS: u32 = 400;
+
+/// Sum of SysTick ticks and calls, and the largest call.
+#[derive(Default)]
+struct Cost {
+    ticks: u64,
+    calls: u64,
+    max: u32,
+}
+
+impl Cost {
+    /// Runs `f`, adding its SysTick ticks (the counter counts down, 24 bits, no interrupt).
+    fn time<R>(&mut self, f: impl FnOnce() -> R) -> R {
+        let t0 = SYST::get_current();
+        let r = f();
+        let dt = t0.wrapping_sub(SYST::get_current()) & SYST_MASK;
+        self.ticks += u64::from(dt);
+        self.calls += 1;
+        self.max = self.max.max(dt);
+        r
+    }
+
+    fn mean(&self) -> u64 {
+        self.ticks / self.calls.max(1)
+    }
+}
+
+/// Measures and prints; the bench stays virtual, nothing is paced.
+pub fn report(
+    mut syst: SYST,
+    app: &mut Loop,
+    mut virt: VirtualIo,
+    out: &mut impl Write,
+) -> Result<(), core::fmt::Error> {
+    syst.set_clock_source(SystClkSource::Core);
+    syst.set_reload(SYST_MASK);
+    syst.clear_current();
+    syst.enable_counter();
+
+    let mut tick = Cost::default();
+    for _ in 0..LOOP_MS {
+        tick.time(|| app.tick(&mut virt));
+        virt.step_1ms().map_err(|_| core::fmt::Error)?;
+    }
+    writeln!(
+        out,
+        "timing loop_ticks={} systick_ticks_per_tick mean={} max={}",
+        tick.calls,
+        tick.mean(),
+        tick.max
+    )?;
+
+    let bad = |_| core::fmt::Error;
+    let bench = WhiteBox::<f32>::paper();
+    let mut st = bench.steady_state(50.0).map_err(bad)?;
+    let mut rk4 = Cost::default();
+    for k in 0..MODEL_CALLS {
+        let u = if k % 200 < 100 { 30.0 } else { 70.0 };
+        rk4.time(|| bench.step(&mut st, u, 1e-3, Scheme::Rk4))
+            .map_err(bad)?;
+    }
+    let p = models::pressure::model().map_err(|_| core::fmt::Error)?;
+    let q = models::flow::model().map_err(|_| core::fmt::Error)?;
+    let (pq, qq) = (
+        NarmaxQ::quantize(&p).map_err(|_| core::fmt::Error)?,
+        NarmaxQ::quantize(&q).map_err(|_| core::fmt::Error)?,
+    );
+    let (mut sp, mut spq) = (p.state_at(50.0, 2.66), pq.state_at(50.0, 2.66));
+    let (mut sq, mut sqq) = (q.state_at(50.0, 15.8), qq.state_at(50.0, 15.8));
+    let mut c = [
+        Cost::default(),
+        Cost::default(),
+        Cost::default(),
+        Cost::default(),
+    ];
+    for k in 0..MODEL_CALLS {
+        let u = 30.0 + (k % 40) as f32;
+        c[0].time(|| p.simulate_step(&mut sp, u));
+        c[1].time(|| pq.simulate_step(&mut spq, u));
+        c[2].time(|| q.simulate_step(&mut sq, u));
+        c[3].time(|| qq.simulate_step(&mut sqq, u));
+    }
+    writeln!(out, "timing rk4 systick_ticks_per_step={}", rk4.mean())?;
+    writeln!(
+        out,
+        "timing narmax systick_ticks_per_step pressure_f32={} pressure_q15={} flow_f32={} flow_q15={}",
+        c[0].mean(),
+        c[1].mean(),
+        c[2].mean(),
+        c[3].mean()
+    )?;
+    // The virtual bench is not part of the product: its cost is left out above.
+    let _ = virt.pressure_code();
+    Ok(())
+}
