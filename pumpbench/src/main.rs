@@ -17,6 +17,7 @@ mod plots;
 mod simulate;
 mod study;
 mod train;
+mod vfdsim;
 
 use clap::{Parser, Subcommand, ValueEnum};
 use std::path::PathBuf;
@@ -52,6 +53,33 @@ enum Precision {
 
 #[derive(Subcommand)]
 enum Command {
+    /// A simulated VFD on a serial port: a Modbus RTU slave with the controller's VFD register
+    /// map (torque reference written with FC 06; speed, torque and status read with FC 03)
+    /// that drives a virtual bench in real time. For host tests over a pseudo-terminal pair
+    /// and for the firmware in QEMU (`cargo xtask qemu --vfd PTY`). Logs a line a second.
+    VfdSim {
+        /// The serial device (e.g. /dev/pts/3, /dev/ttyUSB0), set to 19200 8N1 raw.
+        #[arg(long)]
+        port: PathBuf,
+        /// Modbus unit address (1..247).
+        #[arg(long, default_value_t = 1)]
+        unit: u8,
+        /// Counts of the torque registers for 100 % torque (vendors: 16384 or 10000).
+        #[arg(long, default_value_t = 16384)]
+        counts_per_100: u16,
+        /// rpm per count of the speed register.
+        #[arg(long, default_value_t = 1.0)]
+        rpm_per_count: f32,
+        /// Silence that ends a request, ms.
+        #[arg(long, default_value_t = 5)]
+        idle_ms: u32,
+        /// Stop after this many seconds (default: run until killed).
+        #[arg(long)]
+        seconds: Option<f64>,
+        /// Noise seed of the virtual bench.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+    },
     /// Simulate a torque-reference input; one output row per input row.
     ///
     /// The bench starts at the steady state of the first row's torque; each row's torque is
@@ -412,6 +440,25 @@ fn run(cli: Cli) -> Result<(), Failure> {
             };
             output::write_csv(output.as_deref(), |w| excite::run(&o, w))
         }
+        Command::VfdSim {
+            port,
+            unit,
+            counts_per_100,
+            rpm_per_count,
+            idle_ms,
+            seconds,
+            seed,
+        } => vfdsim::run(
+            &port,
+            &vfdsim::Options {
+                unit,
+                counts_per_100_pct: counts_per_100,
+                rpm_per_count,
+                idle_ms,
+                seconds,
+                seed,
+            },
+        ),
         Command::Export { weights, output } => {
             let m = modelfile::ModelFile::read(&weights)?;
             let source = weights.display().to_string();
