@@ -17,7 +17,7 @@
 //! |------|--------------------------|--------|-------|
 //! | PA0  | CN8 A0, CN7-28           | pressure transmitter, ADC1_IN0 | 4-20 mA loop through a 150 Ω shunt to GND (0.6-3.0 V; 22 mA = 3.3 V full scale); a series resistor (≈ 1 kΩ) and clamp diodes to 3.3 V / GND protect the pin if the shunt opens |
 //! | PA1  | CN8 A1, CN7-30           | flow transmitter, ADC1_IN1 | as PA0 |
-//! | PA4  | CN8 A2, CN7-32           | torque reference, DAC_OUT1, 0-3.3 V | external non-inverting amplifier, gain 1 + R2/R1 = 3.03 (e.g. R1 = 10 kΩ, R2 = 20.3 kΩ), rail-to-rail op-amp on ≥ 12 V, to the VFD's 0-10 V analog input; ≈ 100 kΩ pull-down on the amplifier's input so the VFD sees 0 V while the MCU is in reset |
+//! | PA4  | CN8 A2, CN7-32           | torque reference, DAC_OUT1, 0-3.3 V | DAC output buffer off (rail to rail, up to 15 kΩ source): into an external non-inverting amplifier, gain 1 + R2/R1 = 3.03 (e.g. R1 = 10.0 kΩ, R2 = 20.3 kΩ, E192), single-supply op-amp whose input and output reach 0 V (rail-to-rail, 12-15 V supply), to the VFD's 0-10 V analog input; a 10 MΩ pull-down on the amplifier's input so the VFD sees 0 V while the MCU is in reset (keep the DAC's load ≥ 1.5 MΩ: 10 MΩ costs < 0.2 %) |
 //! | PA9  | CN5 D8, CN10-21          | SCADA USART1_TX (AF7) | to DI of an RS-485 transceiver (e.g. MAX3485, 3.3 V) |
 //! | PA10 | CN9 D2, CN10-33          | SCADA USART1_RX (AF7) | from RO; internal pull-up on (RO is high-Z while the driver is on) |
 //! | PA8  | CN9 D7, CN10-23          | SCADA RS-485 DE | to DE and /RE tied together: high while sending |
@@ -173,7 +173,8 @@ pub struct NucleoBoard {
     pressure_pin: PA0<Analog>,
     /// Flow transmitter shunt, A1.
     flow_pin: PA1<Analog>,
-    /// DAC channel 1 (PA4), 0-3.3 V torque reference before the ×3.03 amplifier.
+    /// DAC channel 1 (PA4), output buffer off: 0-3.3 V torque reference before the ×3.03
+    /// amplifier.
     dac: C1,
     /// Independent watchdog, fed after every tick.
     watchdog: IndependentWatchdog,
@@ -288,6 +289,13 @@ pub fn run() -> ! {
     );
 
     let mut dac = dp.DAC.constrain(gpioa.pa4.into_analog(), &mut rcc);
+    // Output buffer off (BOFF1): the buffered output only spans 0.2 V..VDDA - 0.2 V, so 0 %
+    // would reach the VFD as ≈ 0.6 V (≈ 6 % torque) and 100 % as ≈ 9.4 V; unbuffered it spans
+    // 0..VDDA, which the ×3.03 amplifier's high-impedance input can take.
+    // SAFETY: one read-modify-write of DAC_CR during single-threaded start-up, before the
+    // channel is enabled; no interrupt touches the DAC, and the HAL's `C1` writes the same
+    // register the same way (through the same pointer).
+    unsafe { (*pac::DAC::ptr()).cr().modify(|_, w| w.boff1().set_bit()) };
     dac.set_value(0);
     dac.enable();
 
