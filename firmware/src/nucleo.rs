@@ -62,10 +62,16 @@ use stm32f4xx_hal::{
 /// Modbus RTU line speed, bit/s (both links).
 const BAUD_BPS: u32 = 19_200;
 
-/// Silence that ends an RTU frame, ms: 3.5 characters at 19 200 baud are 1.82 ms; the loop
-/// counts whole 1 ms ticks, so the next millisecond above that (2 ms) — a gap shorter than
-/// 2 ms but longer than 1 ms may read as 1 ms, which the framer does not take for an end.
-const RTU_IDLE_MS: u32 = 2;
+/// Silence that ends an RTU frame, ms (as `controller::rtu` asks: the next millisecond above
+/// 3.5 characters, plus one for the tick's resolution).
+///
+/// 3.5 characters at 19 200 baud 8N1 are 1.82 ms. Bytes are stamped with the whole
+/// millisecond in which the loop reads them, so a measured silence of `n` ms is a real one
+/// of more than `n - 1` ms: with 3 the frame ends after more than 2 ms of real silence,
+/// never less than the 1.82 ms the spec asks for (with 2 it could end after just over 1 ms:
+/// still longer than the 0.78 ms, 1.5 characters, allowed inside a frame, but shorter than
+/// the spec's inter-frame gap). The cost is at most 1 ms more per exchange.
+const RTU_IDLE_MS: u32 = 3;
 
 /// Watchdog timeout, ms. The IWDG runs from the LSI (17-47 kHz on the F446, 32 kHz
 /// nominal), so the real timeout is ≈ 68-190 ms; the loop feeds it every 1 ms.
