@@ -6,7 +6,7 @@
 //! - [`vfd`]: the VFD Modbus RTU master; [`vfdsim`]: a simulated drive (its slave side);
 //! - [`rtu`]: RTU framing by silence;
 //! - [`app`]: the 1 ms loop that ties them to the white-box and NARMAX models;
-//! - [`bench`]: the virtual bench that stands in for the real one (QEMU, host tests).
+//! - [`mod@bench`]: the virtual bench that stands in for the real one (QEMU, host tests).
 #![cfg_attr(not(test), no_std)]
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]

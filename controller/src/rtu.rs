@@ -5,7 +5,7 @@
 //! milliseconds, so a board sets `idle_ms` to the next millisecond above that, plus one for the
 //! tick's resolution. QEMU marks no silence on its serial ports (bytes arrive as the guest reads
 //! them), so the virtual bench uses a longer gap (see the firmware). A frame longer than
-//! [`MAX_FRAME`] bytes is dropped whole: its end is still waited for, and no part of it is
+//! [`MAX_FRAME`](crate::scada::MAX_FRAME) bytes is dropped whole: its end is still waited for, and no part of it is
 //! handed on.
 
 pub use crate::vfd::Frame;

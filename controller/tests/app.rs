@@ -217,3 +217,11 @@ fn residuals_are_measured_minus_predicted() {
     // The virtual bench is a few percent off the model: the white-box residual shows it.
     assert!(v.whitebox_pressure_residual_mca.abs() > 0.01, "{v:?}");
 }
+
+#[test]
+fn loop_state_size() {
+    // The loop's state lives on the MCU's stack (or in a static): printed for the README.
+    let n = std::mem::size_of::<Loop>();
+    println!("size_of App (the firmware's loop state): {n} B");
+    assert!(n < 12 * 1024, "{n} B");
+}

@@ -50,8 +50,6 @@ pub fn open_raw(path: &Path) -> Result<File, Failure> {
     Ok(file)
 }
 
-
-
 /// Runs the simulator on `port` until `seconds` have passed (or forever).
 pub fn run(port: &Path, o: &Options) -> Result<(), Failure> {
     let map = VfdMap {
@@ -98,12 +96,10 @@ pub fn run(port: &Path, o: &Options) -> Result<(), Failure> {
             Err(e) => return Err(io_err(e)),
         }
         while sim_ms < now_ms {
-            bench
-                .step_1ms(sim.torque_ref_pct())
-                .map_err(|e| Failure {
-                    code: 1,
-                    message: format!("virtual bench: {e}"),
-                })?;
+            bench.step_1ms(sim.torque_ref_pct()).map_err(|e| Failure {
+                code: 1,
+                message: format!("virtual bench: {e}"),
+            })?;
             sim_ms += 1;
             if sim_ms.is_multiple_of(1000) {
                 eprintln!(

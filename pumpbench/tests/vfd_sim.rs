@@ -32,8 +32,7 @@ fn drive(m: &mut VfdMaster, port: &mut std::fs::File, start: Instant, ms: u64, p
         if framer.poll(now as u32, &mut frame) {
             m.receive(&frame);
         }
-        if m.poll(now as u32, &mut out).is_some() || m.start(now as u32, pct, &mut out).is_some()
-        {
+        if m.poll(now as u32, &mut out).is_some() || m.start(now as u32, pct, &mut out).is_some() {
             port.write_all(&out).unwrap();
         }
         std::thread::sleep(Duration::from_millis(1));

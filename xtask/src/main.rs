@@ -381,7 +381,11 @@ fn qemu(args: &[String]) -> Result {
         cmd.args(["-display", "none", "-monitor", "none"]);
         cmd.args(["-serial", if o.scada_pty { "pty" } else { "null" }]);
         cmd.arg("-serial");
-        cmd.arg(o.vfd.as_deref().unwrap_or("null"));
+        match &o.vfd {
+            // QEMU takes a host serial device by its /dev path: resolve links (socat's).
+            Some(p) => cmd.arg(std::fs::canonicalize(p).map_err(|e| format!("--vfd {p}: {e}"))?),
+            None => cmd.arg("null"),
+        };
         eprintln!("==> qemu (real time, until stopped: Ctrl-C)");
         let status = cmd
             .status()
