@@ -8,7 +8,7 @@
 //! bench and `pumpbench vfd-sim` both use it, so the master is tested against one slave on the
 //! host and on the target.
 
-use crate::scada::crc16;
+use crate::scada::{crc16, signed_register};
 use crate::vfd::{Frame, VfdMap};
 
 /// Status word bit 0: the drive runs (torque reference above 0).
@@ -31,17 +31,6 @@ pub struct VfdSim {
     map: VfdMap,
     reference_counts: u16,
     writes: u32,
-}
-
-fn signed(x: f32) -> u16 {
-    let r = if x.is_nan() {
-        0.0
-    } else if x < 0.0 {
-        x - 0.5
-    } else {
-        x + 0.5
-    };
-    r.clamp(f32::from(i16::MIN), f32::from(i16::MAX)) as i16 as u16
 }
 
 impl VfdSim {
@@ -106,9 +95,10 @@ impl VfdSim {
                 } else {
                     let mut block = [0u16; crate::vfd::MAX_READ as usize];
                     let m = &self.map;
-                    block[usize::from(m.speed_offset)] = signed(values.speed_rpm / m.rpm_per_count);
+                    block[usize::from(m.speed_offset)] =
+                        signed_register(values.speed_rpm / m.rpm_per_count, 1.0);
                     block[usize::from(m.torque_offset)] =
-                        signed(values.torque_pct / 100.0 * f32::from(m.counts_per_100_pct));
+                        signed_register(values.torque_pct, f32::from(m.counts_per_100_pct) / 100.0);
                     block[usize::from(m.status_offset)] = self.status();
                     out.extend_from_slice(&[f[0], 3, (2 * count) as u8]).ok()?;
                     for w in &block[..usize::from(count)] {

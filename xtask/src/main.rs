@@ -387,9 +387,21 @@ fn qemu(args: &[String]) -> Result {
             None => cmd.arg("null"),
         };
         eprintln!("==> qemu (real time, until stopped: Ctrl-C)");
-        let status = cmd
-            .status()
-            .map_err(|e| format!("cannot start qemu-system-arm: {e}"))?;
+        if !o.scada_pty {
+            let status = cmd
+                .status()
+                .map_err(|e| format!("cannot start qemu-system-arm: {e}"))?;
+            return if status.success() {
+                Ok(())
+            } else {
+                Err(format!("qemu: {status}"))
+            };
+        }
+        let (mut qemu, pty, _holder, _) = e2e::start_pty(cmd, true)?;
+        eprintln!(
+            "SCADA slave (unit 1, RTU 19200 8N1) on {pty}; e.g.\n  mbpoll -m rtu -b 19200 -P none -a 1 -t 3 -r 1 -c 18 {pty}\n  mbpoll -m rtu -b 19200 -P none -a 1 -t 4 -r 1 -1 {pty} 5000 1"
+        );
+        let status = qemu.0.wait().map_err(|e| format!("qemu: {e}"))?;
         return if status.success() {
             Ok(())
         } else {
@@ -410,12 +422,13 @@ fn qemu(args: &[String]) -> Result {
 mod e2e {
     use super::{qemu_command, Result};
     use std::io::{BufRead, BufReader, Write};
+    use std::os::unix::fs::OpenOptionsExt;
     use std::path::Path;
     use std::process::{Child, Command, Stdio};
     use std::time::{Duration, Instant};
 
     /// QEMU, killed when dropped.
-    struct Qemu(Child);
+    pub struct Qemu(pub Child);
     impl Drop for Qemu {
         fn drop(&mut self) {
             let _ = self.0.kill();
@@ -450,11 +463,24 @@ mod e2e {
             .collect()
     }
 
-    pub fn run(elf: &Path) -> Result<String> {
-        let mut cmd = qemu_command(elf, &["mode=0".into()]);
-        cmd.args(["-display", "none", "-monitor", "none"])
-            .args(["-serial", "pty", "-serial", "null"])
-            .stdin(Stdio::null())
+    /// QEMU with its SCADA port on a pseudo-terminal, started: the process (killed when
+    /// dropped), the pty's path, a handle that holds the pty open, and QEMU's output lines
+    /// (also echoed to the terminal if `echo`).
+    ///
+    /// The handle matters: when the last process closes a pty's far end QEMU stops reading
+    /// it and looks again only once a second, so a client that opens the port anew for each
+    /// request (mbpoll does) could lose up to 1 s, more than its timeout. Held open, the port
+    /// stays connected between clients.
+    pub fn start_pty(
+        mut cmd: Command,
+        echo: bool,
+    ) -> Result<(
+        Qemu,
+        String,
+        std::fs::File,
+        std::sync::mpsc::Receiver<String>,
+    )> {
+        cmd.stdin(Stdio::null())
             .stdout(Stdio::piped())
             .stderr(Stdio::piped());
         let mut child = cmd
@@ -468,11 +494,17 @@ mod e2e {
         let tx2 = tx.clone();
         std::thread::spawn(move || {
             for line in BufReader::new(stderr).lines().map_while(|l| l.ok()) {
+                if echo {
+                    eprintln!("{line}");
+                }
                 let _ = tx.send(line);
             }
         });
         std::thread::spawn(move || {
             for line in BufReader::new(stdout).lines().map_while(|l| l.ok()) {
+                if echo {
+                    println!("{line}");
+                }
                 let _ = tx2.send(line);
             }
         });
@@ -490,6 +522,21 @@ mod e2e {
             started |= line.starts_with("firmware:");
         }
         let pty = pty.ok_or("no pty")?;
+        // O_NOCTTY (Linux): never become this process's controlling terminal.
+        let holder = std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .custom_flags(0o400)
+            .open(&pty)
+            .map_err(|e| format!("{pty}: {e}"))?;
+        Ok((qemu, pty, holder, rx))
+    }
+
+    pub fn run(elf: &Path) -> Result<String> {
+        let mut cmd = qemu_command(elf, &["mode=0".into()]);
+        cmd.args(["-display", "none", "-monitor", "none"])
+            .args(["-serial", "pty", "-serial", "null"]);
+        let (qemu, pty, _holder, _) = start_pty(cmd, false)?;
         let mut report = format!("SCADA on {pty}\n");
 
         // Read all input registers (FC 04).
@@ -642,7 +689,7 @@ fn main() -> ExitCode {
             print!("{}", e2e::run(&firmware_elf())?);
             Ok(())
         }),
-        _ => Err(format!("usage: cargo xtask <qemu|test>\n  qemu  build the firmware and run it in QEMU on the virtual bench\n  test  fmt, clippy, tests, both firmware images and their size, QEMU runs against the host, mbpoll end to end\n{QEMU_USAGE}")),
+        _ => Err(format!("usage: cargo xtask <qemu|test>\n  qemu  build the firmware and run it in QEMU on the virtual bench\n  test  fmt, clippy, tests, both firmware images and their size, QEMU runs against the host, mbpoll end to end\n  e2e   only the mbpoll end-to-end test\n{QEMU_USAGE}")),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
