@@ -198,19 +198,12 @@ impl LogLine {
     /// QEMU check compares with the host.
     pub fn write_text(&self, out: &mut impl core::fmt::Write) -> core::fmt::Result {
         let v = &self.values;
-        let mode = match self.mode {
-            Mode::Stop => "stop",
-            Mode::Manual => "manual",
-            Mode::Profile => "profile",
-        };
-        let arith = match self.arithmetic {
-            Arithmetic::F32 => "f32",
-            Arithmetic::Fixed => "q15",
-        };
         write!(
             out,
-            "t_s={} mode={mode} narmax={arith} u_pct=",
-            self.t_ms / 1000
+            "t_s={} mode={} narmax={} u_pct=",
+            self.t_ms / 1000,
+            self.mode.name(),
+            self.arithmetic.name()
         )?;
         let fields: [(&str, f32, u32); 12] = [
             ("", v.torque_pct, 2),

@@ -232,11 +232,9 @@ impl Io for VirtualIo {
     }
     fn vfd_send(&mut self, frame: &[u8]) {
         if self.link_up {
+            // A new request replaces an answer not yet taken, as on a half-duplex line.
             let values = self.drive_values();
-            let mut answer = Frame::new();
-            if self.drive.handle(frame, &values, &mut answer).is_some() {
-                self.answer = answer;
-            }
+            self.drive.handle(frame, &values, &mut self.answer);
         }
     }
     fn vfd_receive(&mut self, _now_ms: u32, frame: &mut Frame) -> bool {

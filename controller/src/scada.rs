@@ -74,7 +74,35 @@ pub enum Arithmetic {
     Fixed = 1,
 }
 
+impl Arithmetic {
+    /// The name used in logs and options: `f32` or `q15`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Arithmetic::F32 => "f32",
+            Arithmetic::Fixed => "q15",
+        }
+    }
+
+    /// The arithmetic of a [`Self::name`].
+    pub fn from_name(name: &str) -> Option<Self> {
+        match name {
+            "f32" => Some(Arithmetic::F32),
+            "q15" => Some(Arithmetic::Fixed),
+            _ => None,
+        }
+    }
+}
+
 impl Mode {
+    /// The name used in logs: `stop`, `manual` or `profile`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Mode::Stop => "stop",
+            Mode::Manual => "manual",
+            Mode::Profile => "profile",
+        }
+    }
+
     fn from_register(v: u16) -> Option<Self> {
         match v {
             0 => Some(Mode::Stop),

@@ -114,8 +114,7 @@ fn parse_args(line: &str) -> Result<Args, &str> {
             "seed" => a.seed = number()?,
             "run_ms" => a.run_ms = Some(u32::try_from(number()?).map_err(|_| word)?),
             "vfd" if value == "uart" => a.vfd_uart = true,
-            "narmax" if value == "f32" => a.arithmetic = Arithmetic::F32,
-            "narmax" if value == "q15" => a.arithmetic = Arithmetic::Fixed,
+            "narmax" => a.arithmetic = Arithmetic::from_name(value).ok_or(word)?,
             "timing" if value.is_empty() => a.timing = true,
             _ => return Err(word),
         }
@@ -280,10 +279,7 @@ fn start(out: &mut hio::HostStream) -> Result<(), ()> {
         args.mode as u8,
         args.setpoint,
         args.seed,
-        match args.arithmetic {
-            Arithmetic::F32 => "f32",
-            Arithmetic::Fixed => "q15",
-        },
+        args.arithmetic.name(),
         if args.run_ms.is_some() { "" } else { ", runs until stopped" }
     );
     let mut board = QemuBoard {

@@ -174,10 +174,8 @@ fn host_replay(header: &str, run_ms: u32) -> Result<Vec<String>> {
         1 => Mode::Manual,
         _ => Mode::Profile,
     };
-    let arithmetic = match field(header, "narmax")? {
-        "q15" => Arithmetic::Fixed,
-        _ => Arithmetic::F32,
-    };
+    let arithmetic = Arithmetic::from_name(field(header, "narmax")?)
+        .ok_or_else(|| format!("bad 'narmax' in line: {header}"))?;
     let config = AppConfig {
         initial_mode: mode,
         initial_setpoint: num(header, "setpoint")?,
