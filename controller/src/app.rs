@@ -5,7 +5,9 @@
 //! 1. the torque requested by the mode (holding register 1: stop → 0 %, manual → the
 //!    setpoint, profile → the paper's pulses, restarted from its seed on entry);
 //! 2. the VFD link: answers taken, timeouts and retries, the next exchange started; during
-//!    the link alarm the applied torque reference is the safe value, 0 %;
+//!    the link alarm (the reference cannot be delivered) the applied torque reference is the
+//!    safe value, 0 %; while the drive's reads fail its readings are published as 0 with the
+//!    "readings invalid" status bit (see [`crate::vfd`]);
 //! 3. the applied reference to the torque output (DAC / PWM);
 //! 4. every pressure period (50 ms) the pressure transmitter is read, every flow period
 //!    (100 ms) the flow transmitter; each NARMAX model steps with its sample: one-step-ahead on
@@ -435,15 +437,19 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize> App<NP,
 
         let link_ok = !self.vfd.alarm();
         let (p_fault, q_fault) = (self.pressure_in.faulted(), self.flow_in.faulted());
+        // Stale readings are never published: invalid readings read 0, with status bit 6.
         let readings = self.vfd.readings();
+        let blind = readings.is_none();
+        let readings = readings.unwrap_or_default();
         let o = &mut self.out;
         o.status = Status {
             running: self.scada.mode != Mode::Stop,
-            any_alarm: !link_ok || p_fault || q_fault || self.model_fault,
+            any_alarm: !link_ok || blind || p_fault || q_fault || self.model_fault,
             extrapolating: self.wb_extrapolating || self.nx_clamped.iter().any(|&c| c),
             vfd_link_ok: link_ok,
             pressure_fault: p_fault,
             flow_fault: q_fault,
+            vfd_readings_invalid: blind,
         };
         o.torque_pct = u;
         o.vfd_speed_rpm = readings.speed_rpm;

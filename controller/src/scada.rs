@@ -2,7 +2,7 @@
 //!
 //! | input register (FC 04) | meaning | unit |
 //! |---|---|---|
-//! | 0 | status bits: 0 running, 1 any alarm, 2 model extrapolating, 3 VFD link ok, 4 pressure transmitter fault, 5 flow transmitter fault | |
+//! | 0 | status bits: 0 running, 1 any alarm, 2 model extrapolating, 3 VFD link ok (the torque reference is delivered), 4 pressure transmitter fault, 5 flow transmitter fault, 6 VFD readings invalid (reads fail: registers 14-16 read 0) | |
 //! | 1 | applied torque reference | 0.01 % |
 //! | 2 | measured pressure | 0.001 mca, signed |
 //! | 3 | measured flow | 0.01 l/s |
@@ -16,9 +16,9 @@
 //! | 11 | white-box flow residual | 0.01 l/s, signed |
 //! | 12 | NARMAX pressure residual | 0.001 mca, signed |
 //! | 13 | NARMAX flow residual | 0.01 l/s, signed |
-//! | 14 | VFD actual speed (read over the VFD link) | 0.1 rpm, signed |
-//! | 15 | VFD actual torque | 0.01 %, signed |
-//! | 16 | VFD status word (the vendor's bits) | |
+//! | 14 | VFD actual speed (read over the VFD link; 0 while status bit 6 is set) | 0.1 rpm, signed |
+//! | 15 | VFD actual torque (0 while bit 6 is set) | 0.01 %, signed |
+//! | 16 | VFD status word, the vendor's bits (0 while bit 6 is set) | |
 //! | 17 | uptime (wraps) | s |
 //!
 //! | holding register (FC 03, 06, 16) | meaning | range |
@@ -27,7 +27,8 @@
 //! | 1 | mode: 0 stop, 1 manual setpoint, 2 built-in excitation profile | 0..=2 |
 //! | 2 | NARMAX arithmetic: 0 f32, 1 fixed point | 0..=1 |
 //!
-//! Exceptions as the Modbus spec says: 01 illegal function (anything but 03, 04, 06, 16),
+//! Exceptions as the Modbus spec says: 01 illegal function (anything but 03, 04, 06, 16, whatever
+//! its fields),
 //! 02 illegal data address (a range outside the map), 03 illegal data value (a quantity of 0 or
 //! above the limit, a byte count that does not match, a setpoint above 10000, an unknown mode).
 //! A write with any bad value changes nothing. Frames with a bad CRC, for another unit
@@ -122,12 +123,15 @@ pub struct Status {
     pub any_alarm: bool,
     /// Bit 2: a model runs outside its fitted/training range.
     pub extrapolating: bool,
-    /// Bit 3: the VFD link answers.
+    /// Bit 3: the VFD link delivers the torque reference (no link alarm).
     pub vfd_link_ok: bool,
     /// Bit 4: pressure transmitter fault (NAMUR NE 43).
     pub pressure_fault: bool,
     /// Bit 5: flow transmitter fault.
     pub flow_fault: bool,
+    /// Bit 6: the drive's readings are invalid (its reads fail, or the link is down): the
+    /// controller is blind to the drive, and input registers 14-16 read 0.
+    pub vfd_readings_invalid: bool,
 }
 
 impl Status {
@@ -140,6 +144,7 @@ impl Status {
             self.vfd_link_ok,
             self.pressure_fault,
             self.flow_fault,
+            self.vfd_readings_invalid,
         ]
         .iter()
         .enumerate()
@@ -312,6 +317,17 @@ impl ScadaSlave {
         if crc16(&frame[..n - 2]) != u16::from_le_bytes([frame[n - 2], frame[n - 1]]) {
             return None;
         }
+        let func = frame[1];
+        if !matches!(func, 3 | 4 | 6 | 16) {
+            // Illegal function, whatever the fields: rmodbus would check a coil function's
+            // quantity first and answer 03.
+            let body = [self.unit, func | 0x80, 1];
+            response.extend_from_slice(&body).ok()?;
+            response
+                .extend_from_slice(&crc16(&body).to_le_bytes())
+                .ok()?;
+            return Some(response.len());
+        }
         let mut mf = ModbusFrame::new(self.unit, frame, ModbusProto::Rtu, response)
             .with_broadcast_units(&[]);
         mf.parse().ok()?;
@@ -319,7 +335,6 @@ impl ScadaSlave {
             return None;
         }
         if mf.processing_required {
-            let func = frame[1];
             let result = match func {
                 3 | 4 if mf.count == 0 => Err(ErrorKind::IllegalDataValue),
                 16 if mf.count == 0 || usize::from(frame[6]) != 2 * usize::from(mf.count) => {
@@ -484,6 +499,17 @@ mod tests {
         );
         assert_eq!(exception(&mut s, &[1, 6, 0, 1, 0, 3]), 3, "mode 3");
         assert_eq!(exception(&mut s, &[1, 6, 0, 2, 0, 2]), 3, "arithmetic 2");
+        // Regression (hostile run): an unsupported function is 01 whatever its fields; an
+        // oversized quantity in FC 01, 02 or 15 used to answer 03 (rmodbus's own check).
+        for body in [
+            &[1, 1, 0, 0, 0x07, 0xD1][..],
+            &[1, 2, 0, 0, 0xFF, 0xFF],
+            &[1, 0x0F, 0, 0, 0x07, 0xB1, 1, 0xFF],
+            &[1, 5, 0, 0, 0x12, 0x34],
+            &[1, 0x0F, 0, 0, 0, 0, 0],
+        ] {
+            assert_eq!(exception(&mut s, body), 1, "{body:02x?}");
+        }
         assert_eq!(
             exception(&mut s, &[1, 16, 0, 0, 0, 2, 2, 0, 1]),
             3,

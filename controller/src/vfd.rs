@@ -5,9 +5,18 @@
 //! (FC 03) holding actual speed, torque and status; the register map and scaling are
 //! configuration ([`VfdMap`]), since vendors differ (16384 or 10000 counts = 100 % torque).
 //! An exchange is a request and up to [`VfdMap::retries`] repeats, each with
-//! [`VfdMap::timeout_ms`]; [`VfdMap::fail_limit`] failed exchanges in a row raise the link
-//! alarm, and while it stands the torque reference written is the safe value, 0 %. The first
-//! successful exchange clears it.
+//! [`VfdMap::timeout_ms`]. Failures are counted per kind of exchange as well as in all, since
+//! a drive may fail one kind only (reject or ignore every write, yet answer every read):
+//!
+//! - **link alarm** ([`VfdMaster::alarm`]): [`VfdMap::fail_limit`] failed *writes* in a row
+//!   (the torque reference cannot be delivered), or that many failed exchanges of any kind in
+//!   a row (a silent drive: write, read, write). While it stands the reference written is the
+//!   safe value, 0 %, and so is the analog one ([`VfdMaster::applied_torque_pct`]). Only a
+//!   delivered reference (a write echoed exactly) clears it; a good read does not.
+//! - **blind** ([`VfdMaster::blind`]): [`VfdMap::fail_limit`] failed *reads* in a row, or
+//!   that many failed exchanges in all, or no read answered yet. The drive's readings are then
+//!   invalid ([`VfdMaster::readings`] is `None`); the next good read makes them valid again.
+//!   A drive that takes writes but fails reads leaves the link up and the controller blind.
 //!
 //! Requests come from `rmodbus`; responses are checked here, strictly (exact length, CRC,
 //! unit, function, byte count): rmodbus's client parser accepts length mismatches and its
@@ -126,8 +135,14 @@ pub struct VfdMaster {
     map: VfdMap,
     pending: Option<Pending>,
     next_is_write: bool,
+    /// Failed exchanges in a row, of any kind (a success of either kind resets it).
     failures_in_row: u8,
+    /// Failed torque writes in a row (only a delivered write resets it).
+    write_failures_in_row: u8,
+    /// Failed reads in a row (only a good read resets it).
+    read_failures_in_row: u8,
     alarm: bool,
+    blind: bool,
     readings: VfdReadings,
     exchanges_ok: u32,
 }
@@ -141,20 +156,31 @@ impl VfdMaster {
             pending: None,
             next_is_write: true,
             failures_in_row: 0,
+            write_failures_in_row: 0,
+            read_failures_in_row: 0,
             alarm: true,
+            blind: true,
             readings: VfdReadings::default(),
             exchanges_ok: 0,
         })
     }
 
-    /// `true` while the link alarm stands.
+    /// `true` while the link alarm stands: the torque reference cannot be delivered (see the
+    /// module docs); the safe value, 0 %, is applied.
     pub fn alarm(&self) -> bool {
         self.alarm
     }
 
-    /// What the drive last reported.
-    pub fn readings(&self) -> VfdReadings {
-        self.readings
+    /// `true` while the drive's readings are invalid: reads fail (or none has been answered
+    /// yet), whether or not writes still get through.
+    pub fn blind(&self) -> bool {
+        self.blind
+    }
+
+    /// What the drive last reported; `None` while [`Self::blind`] (the last good values are
+    /// stale and are not handed out).
+    pub fn readings(&self) -> Option<VfdReadings> {
+        (!self.blind).then_some(self.readings)
     }
 
     /// Successful exchanges so far.
@@ -188,7 +214,7 @@ impl VfdMaster {
             self.request(p.kind, out)
         } else {
             self.pending = None;
-            self.failed();
+            self.failed(p.kind);
             None
         }
     }
@@ -229,29 +255,49 @@ impl VfdMaster {
         made.ok().map(|()| out.len())
     }
 
-    fn failed(&mut self) {
+    fn failed(&mut self, kind: Kind) {
+        let limit = self.map.fail_limit;
         self.failures_in_row = self.failures_in_row.saturating_add(1);
-        if self.failures_in_row >= self.map.fail_limit {
-            self.alarm = true;
+        let of_kind = match kind {
+            Kind::WriteTorque(_) => &mut self.write_failures_in_row,
+            Kind::Read => &mut self.read_failures_in_row,
+        };
+        *of_kind = of_kind.saturating_add(1);
+        let all = self.failures_in_row >= limit;
+        self.alarm |= all || self.write_failures_in_row >= limit;
+        self.blind |= all || self.read_failures_in_row >= limit;
+    }
+
+    fn succeeded(&mut self, kind: Kind) {
+        self.failures_in_row = 0;
+        match kind {
+            Kind::WriteTorque(_) => {
+                self.write_failures_in_row = 0;
+                self.alarm = false;
+            }
+            Kind::Read => {
+                self.read_failures_in_row = 0;
+                self.blind = false;
+            }
         }
+        self.exchanges_ok = self.exchanges_ok.wrapping_add(1);
     }
 
     /// Takes a received frame. A valid answer to the pending request completes the exchange
-    /// (and clears the alarm); an exception answer fails it; anything else (noise, another
-    /// unit, bad CRC, wrong length) is ignored and the request runs into its timeout.
+    /// (a write clears the alarm, a read the blindness); an exception answer fails it;
+    /// anything else (noise, another unit, bad CRC, wrong length, a write echoed with another
+    /// value) is ignored and the request runs into its timeout.
     pub fn receive(&mut self, frame: &[u8]) {
         let Some(p) = self.pending else { return };
         match self.check(p.kind, frame) {
             Answer::Ignore => {}
             Answer::Exception => {
                 self.pending = None;
-                self.failed();
+                self.failed(p.kind);
             }
             Answer::Ok => {
                 self.pending = None;
-                self.failures_in_row = 0;
-                self.alarm = false;
-                self.exchanges_ok = self.exchanges_ok.wrapping_add(1);
+                self.succeeded(p.kind);
             }
         }
     }
@@ -379,11 +425,11 @@ mod tests {
         exchange(&mut m, &mut d, 10, 50.0);
         assert_eq!(
             m.readings(),
-            VfdReadings {
+            Some(VfdReadings {
                 speed_rpm: 1500.0,
                 torque_pct: -25.0,
                 status: 0x37
-            }
+            })
         );
         exchange(&mut m, &mut d, 20, 50.0);
         assert_eq!(d.reference, 8192);
@@ -479,6 +525,150 @@ mod tests {
             m.start(0, 10.0, &mut out).map(|_| out[1]),
             Some(3),
             "next exchange starts"
+        );
+    }
+
+    /// How a faulty drive misbehaves (each seen in a hostile run against the firmware).
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    enum Fault {
+        /// Answers reads; rejects every write with exception 04.
+        RejectWrites,
+        /// Answers reads; never answers a write.
+        SilentOnWrites,
+        /// Answers reads; echoes another value (0x3FFF) to a write.
+        EchoWrongValue,
+        /// Answers writes; answers reads with a wrong byte count.
+        BadReadByteCount,
+        /// Answers writes; never answers a read.
+        SilentOnReads,
+    }
+
+    impl Drive {
+        fn faulty_answer(&mut self, req: &[u8], fault: Fault) -> Option<Vec<u8>> {
+            let good = self.answer(req);
+            match (fault, req[1]) {
+                (Fault::RejectWrites, 6) => Some(with_crc(&[req[0], 0x86, 4])),
+                (Fault::SilentOnWrites, 6) | (Fault::SilentOnReads, 3) => None,
+                (Fault::EchoWrongValue, 6) => {
+                    let mut body = req[..6].to_vec();
+                    body[4..6].copy_from_slice(&0x3FFFu16.to_be_bytes());
+                    Some(with_crc(&body))
+                }
+                (Fault::BadReadByteCount, 3) => {
+                    let mut body = good[..good.len() - 2].to_vec();
+                    body[2] = 4;
+                    Some(with_crc(&body))
+                }
+                _ => Some(good),
+            }
+        }
+    }
+
+    /// Runs the master against `drive` for `ms` milliseconds from `*now`, answering each
+    /// request at once (or never) as `fault` says; `pct` requested throughout.
+    fn run_against(
+        m: &mut VfdMaster,
+        d: &mut Drive,
+        fault: Option<Fault>,
+        now: &mut u32,
+        ms: u32,
+        pct: f32,
+    ) {
+        let mut out = Frame::new();
+        for _ in 0..ms {
+            let mut sent = m.poll(*now, &mut out).map(|n| out[..n].to_vec());
+            if sent.is_none() {
+                sent = m.start(*now, pct, &mut out).map(|n| out[..n].to_vec());
+            }
+            if let Some(req) = sent {
+                let ans = match fault {
+                    Some(f) => d.faulty_answer(&req, f),
+                    None => Some(d.answer(&req)),
+                };
+                if let Some(a) = ans {
+                    m.receive(&a);
+                }
+            }
+            *now += 1;
+        }
+    }
+
+    /// Regression (hostile run): exchanges alternate write and read, and a good read used to
+    /// reset the failure count, so a drive failing only writes kept the link "ok" and the
+    /// torque applied. A reference that cannot be delivered must raise the alarm and force
+    /// the safe value; a drive that takes writes but fails reads must leave the link up and
+    /// flag its readings invalid (the controller is blind to it).
+    #[test]
+    fn a_drive_failing_one_kind_of_exchange_is_caught() {
+        for fault in [
+            Fault::RejectWrites,
+            Fault::SilentOnWrites,
+            Fault::EchoWrongValue,
+            Fault::BadReadByteCount,
+            Fault::SilentOnReads,
+        ] {
+            let mut m = VfdMaster::new(VfdMap::example_16384()).unwrap();
+            let mut d = Drive {
+                reference: 0,
+                block: [1234, 8192, 7],
+            };
+            let mut now = 0;
+            run_against(&mut m, &mut d, None, &mut now, 50, 50.0);
+            assert!(!m.alarm() && !m.blind(), "{fault:?}: link up");
+            assert_eq!(m.readings().map(|r| r.status), Some(7));
+            assert_eq!(m.applied_torque_pct(50.0), 50.0);
+            // Three failed exchanges of one kind, each 3 attempts of 100 ms, alternating with
+            // the other kind: well within 3 s.
+            run_against(&mut m, &mut d, Some(fault), &mut now, 3000, 50.0);
+            let writes_fail = matches!(
+                fault,
+                Fault::RejectWrites | Fault::SilentOnWrites | Fault::EchoWrongValue
+            );
+            assert_eq!(m.alarm(), writes_fail, "{fault:?}: link alarm");
+            assert_eq!(
+                m.applied_torque_pct(50.0),
+                if writes_fail { 0.0 } else { 50.0 },
+                "{fault:?}: applied torque"
+            );
+            assert_eq!(m.blind(), !writes_fail, "{fault:?}: blind");
+            assert_eq!(m.readings().is_none(), !writes_fail, "{fault:?}: readings");
+            // The drive healed: the alarm clears on a delivered reference, the readings come
+            // back on a good read.
+            run_against(&mut m, &mut d, None, &mut now, 50, 50.0);
+            assert!(!m.alarm() && !m.blind(), "{fault:?}: back");
+            assert_eq!(d.reference, 8192, "{fault:?}: 50 % delivered again");
+        }
+    }
+
+    /// A silent drive raises the alarm and invalidates the readings together, after the
+    /// configured number of failed exchanges (3: write, read, write), not later.
+    #[test]
+    fn a_silent_drive_raises_the_alarm_after_fail_limit_exchanges() {
+        let mut m = VfdMaster::new(VfdMap::example_16384()).unwrap();
+        let mut d = Drive {
+            reference: 0,
+            block: [1234, 8192, 7],
+        };
+        let mut now = 0;
+        run_against(&mut m, &mut d, None, &mut now, 10, 50.0);
+        assert!(m.readings().is_some());
+        let mut out = Frame::new();
+        let mut t = 0;
+        loop {
+            if m.poll(now, &mut out).is_none() {
+                m.start(now, 50.0, &mut out);
+            }
+            if m.alarm() {
+                break;
+            }
+            now += 1;
+            t += 1;
+            assert!(t <= 900, "alarm later than 3 exchanges of 300 ms");
+        }
+        assert_eq!(t, 900, "alarm after 3 exchanges of 3 × 100 ms");
+        assert!(
+            m.blind() && m.readings().is_none(),
+            "readings invalid with the alarm"
         );
     }
 

@@ -149,7 +149,7 @@ mod tests {
             assert!(!m.alarm());
             assert_eq!(m.exchanges_ok(), 4);
             assert!((sim.torque_ref_pct() - 50.0).abs() < 0.01);
-            let r = m.readings();
+            let r = m.readings().expect("readings after good reads");
             assert!((r.speed_rpm - 1234.5).abs() <= map.rpm_per_count, "{r:?}");
             assert!((r.torque_pct - 42.25).abs() < 0.01, "{r:?}");
             assert_eq!(r.status, STATUS_READY | STATUS_RUNNING);

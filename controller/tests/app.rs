@@ -2,9 +2,10 @@
 //! The 1 ms loop on the virtual bench, on the host: operating point, VFD link alarm,
 //! transmitter faults, the profile, the arithmetic switch and the SCADA registers.
 
-use controller::app::{App, AppConfig, LogLine, NarmaxModel};
+use controller::app::{App, AppConfig, Io, LogLine, NarmaxModel};
 use controller::bench::{VirtualBench, VirtualBenchConfig, VirtualIo};
 use controller::scada::{crc16, Mode, Response};
+use controller::vfd::Frame;
 use model_core::WhiteBox;
 
 /// The firmware's models, the very files it compiles in.
@@ -120,8 +121,13 @@ fn vfd_link_loss_forces_zero_torque_until_it_is_back() {
     run(&mut app, &mut io, 1);
     assert_eq!(io.torque_ref_pct(), 0.0);
     let regs = read_inputs(&mut app);
-    assert_eq!(regs[0] & 0b1010, 0b0010, "alarm, link not ok");
+    assert_eq!(
+        regs[0] & 0b100_1010,
+        0b100_0010,
+        "alarm, link not ok, readings invalid"
+    );
     assert_eq!(regs[1], 0);
+    assert_eq!(&regs[14..17], &[0, 0, 0], "no stale drive readings");
     io.link_up = true;
     run(&mut app, &mut io, 400);
     assert!(!app.vfd().alarm());
@@ -224,4 +230,87 @@ fn loop_state_size() {
     let n = std::mem::size_of::<Loop>();
     println!("size_of App (the firmware's loop state): {n} B");
     assert!(n < 12 * 1024, "{n} B");
+}
+
+/// The virtual bench behind a drive that drops one kind of request (FC 06 writes or FC 03
+/// reads): it never answers them.
+struct OneKindFails {
+    io: VirtualIo,
+    drop_function: Option<u8>,
+}
+
+impl Io for OneKindFails {
+    fn pressure_code(&mut self) -> u16 {
+        self.io.pressure_code()
+    }
+    fn flow_code(&mut self) -> u16 {
+        self.io.flow_code()
+    }
+    fn set_torque_ref(&mut self, pct: f32) {
+        self.io.set_torque_ref(pct)
+    }
+    fn vfd_send(&mut self, frame: &[u8]) {
+        if frame.get(1).copied() != self.drop_function {
+            self.io.vfd_send(frame)
+        }
+    }
+    fn vfd_receive(&mut self, now_ms: u32, frame: &mut Frame) -> bool {
+        self.io.vfd_receive(now_ms, frame)
+    }
+}
+
+fn run_faulty(app: &mut Loop, io: &mut OneKindFails, ms: u32) {
+    for _ in 0..ms {
+        app.tick(io);
+        io.io.step_1ms().unwrap();
+    }
+}
+
+/// Regression (hostile run): a drive that answered reads but not writes kept the link "ok"
+/// and the torque applied, and the drive's last readings stayed in registers 14-16.
+#[test]
+fn a_drive_that_takes_no_writes_forces_zero_and_one_that_gives_no_reads_is_flagged() {
+    // Writes fail: link alarm, 0 % on the analog output, readings still valid.
+    let (mut app, io) = setup(Mode::Manual, 5000);
+    let mut io = OneKindFails {
+        io,
+        drop_function: None,
+    };
+    run_faulty(&mut app, &mut io, 500);
+    assert_eq!(io.io.torque_ref_pct(), 50.0);
+    io.drop_function = Some(6);
+    run_faulty(&mut app, &mut io, 3000);
+    let regs = read_inputs(&mut app);
+    assert_eq!(io.io.torque_ref_pct(), 0.0, "safe torque");
+    assert_eq!(regs[1], 0, "applied torque register");
+    assert_eq!(
+        regs[0] & 0b100_1010,
+        0b000_0010,
+        "alarm, link not ok, readings valid"
+    );
+    assert!(regs[14] != 0, "fresh readings are published");
+    io.drop_function = None;
+    run_faulty(&mut app, &mut io, 500);
+    assert_eq!(
+        io.io.torque_ref_pct(),
+        50.0,
+        "back once a write is delivered"
+    );
+
+    // Reads fail: the reference is delivered (link ok, 50 %), the controller is blind.
+    io.drop_function = Some(3);
+    run_faulty(&mut app, &mut io, 3000);
+    let regs = read_inputs(&mut app);
+    assert_eq!(io.io.torque_ref_pct(), 50.0);
+    assert_eq!(
+        regs[0] & 0b100_1010,
+        0b100_1010,
+        "alarm, link ok, readings invalid"
+    );
+    assert_eq!(&regs[14..17], &[0, 0, 0], "no stale drive readings");
+    io.drop_function = None;
+    run_faulty(&mut app, &mut io, 500);
+    let regs = read_inputs(&mut app);
+    assert_eq!(regs[0] & 0b100_1010, 0b000_1000, "all clear");
+    assert!(regs[14] != 0 && regs[16] != 0, "readings back");
 }
