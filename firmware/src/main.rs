@@ -87,6 +87,10 @@ pub fn start_systick(mut syst: cortex_m::peripheral::SYST, core_hz: u32) {
 
 /// What a board adds to [`Io`] for [`serve`].
 pub trait Board: Io {
+    /// Milliseconds since start (wrapping), the loop's time base. The Nucleo counts SysTick
+    /// interrupts; QEMU reads a free-running timer, as it drops SysTick interrupts when the
+    /// host is busy (see `qemu.rs`).
+    fn now_ms(&mut self) -> u32;
     /// Moves serial bytes (the VFD port); called on every pass of the loop.
     fn poll(&mut self, now_ms: u32);
     /// After each 1 ms tick, with its log line if it made one; `false` ends [`serve`].
@@ -96,16 +100,17 @@ pub trait Board: Io {
     fn idle(&mut self) {}
 }
 
-/// The loop: SCADA frames answered as they complete, one [`App::tick`] per elapsed
-/// millisecond (late ticks are caught up, none is skipped), the board polled in between.
-/// Returns when the board's [`Board::after_tick`] says so.
+/// The loop: SCADA frames answered as they complete (by their length and CRC, or by the
+/// line's silence), one [`App::tick`] per elapsed millisecond of [`Board::now_ms`] (late
+/// ticks are caught up, none is skipped), the board polled in between. Returns when the
+/// board's [`Board::after_tick`] says so.
 pub fn serve<S: Uart, B: Board>(app: &mut Loop, scada: &mut RtuPort<S>, board: &mut B) {
     let mut frame = Frame::new();
     let mut response = Response::new();
     loop {
-        let now = now_ms();
+        let now = board.now_ms();
         board.poll(now);
-        if scada.receive(now, &mut frame) {
+        if scada.receive_complete(now, &mut frame, controller::scada::request_at_end) {
             if let Some(n) = app.scada_frame(&frame, &mut response) {
                 scada.send(&response[..n]);
             }

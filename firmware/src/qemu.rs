@@ -7,9 +7,20 @@
 //! - SCADA: Modbus RTU slave on USART1 (QEMU's first `-serial`).
 //! - VFD: by default the virtual drive answers in-process; with the argument `vfd=uart` the
 //!   master talks on USART2 (the second `-serial`), e.g. to `pumpbench vfd-sim`.
-//! - SysTick paces the loop at 1 ms (QEMU clocks it at 168 MHz whatever the RCC says; the RCC
-//!   is left on HSI, as a PLL-ready wait would hang). Between ticks the core sleeps (`wfi`),
-//!   so `-icount shift=0,sleep=off` runs the loop faster than real time and deterministically.
+//! - Time: TIM2 runs free at 1 MHz and [`Clock`] turns it into milliseconds; the loop ticks
+//!   once per elapsed millisecond of it. SysTick (1 ms; QEMU clocks it at 168 MHz whatever the
+//!   RCC says; the RCC is left on HSI, as a PLL-ready wait would hang) only wakes the core: in
+//!   real time QEMU merges SysTick expiries that fall while its vCPU thread waits for the host
+//!   into one interrupt, so counting them lost 1-6 % of wall time on a busy host (measured
+//!   with SCADA traffic or a parallel build). TIM2's counter is computed from QEMU's virtual
+//!   clock, so it loses nothing. Between ticks the core sleeps (`wfi`), so
+//!   `-icount shift=0,sleep=off` runs the loop faster than real time and deterministically.
+//! - Serial: both USARTs receive by interrupt into a queue ([`RX_QUEUE_BYTES`] each, bytes
+//!   beyond it dropped and counted). QEMU hands the guest the next byte only once it has read
+//!   the last one, so a byte that waits for the next 1 ms tick holds the whole line back
+//!   (≈ 1 byte per ms); the interrupt wakes the core for each byte instead. SCADA requests end
+//!   by their length and CRC ([`controller::scada::request_complete`]) or after
+//!   [`QEMU_IDLE_MS`] of silence (what QEMU's serial lines cannot mark).
 //! - Logs: one text line a second over semihosting (no float formatting: see
 //!   [`controller::app::write_fixed`]).
 //!
@@ -20,15 +31,17 @@
 //! stopped), `vfd=uart`, `timing` (measure the loop and the models, print, exit). A bad
 //! argument is reported and the firmware exits with status 1.
 
-use crate::{now_ms, serve, start_systick, Board};
+use crate::{serve, start_systick, Board};
 use controller::app::{AppConfig, Io, LogLine};
 use controller::bench::{VirtualBench, VirtualBenchConfig, VirtualIo};
 use controller::rtu::{Frame, RtuPort, Uart};
 use controller::scada::{Arithmetic, Mode};
+use core::cell::RefCell;
 use core::fmt::Write as _;
+use cortex_m::interrupt::{free, Mutex};
 use cortex_m_semihosting::{debug, hio};
 use panic_semihosting as _;
-use stm32f4xx_hal::pac;
+use stm32f4xx_hal::pac::{self, interrupt};
 
 /// SysTick under QEMU, Hz.
 const QEMU_SYSTICK_HZ: u32 = 168_000_000;
@@ -41,38 +54,162 @@ const BAUD: u32 = 19_200;
 /// milliseconds; 10 ms keeps frames whole and is far below any master's timeout.
 const QEMU_IDLE_MS: u32 = 10;
 
-/// A polled USART (QEMU's STM32F2xx USART model: a byte in DR, RXNE, TXE/TC always ready).
-struct Usart(&'static pac::usart1::RegisterBlock);
+/// Bytes a USART's receive queue holds: more than four longest RTU frames.
+pub const RX_QUEUE_BYTES: usize = 1024;
+
+/// Bytes received by a USART's interrupt, not yet taken by the loop.
+struct RxQueue {
+    bytes: heapless::Deque<u8, RX_QUEUE_BYTES>,
+    /// Bytes dropped because the queue was full (wraps).
+    dropped: u32,
+}
+
+impl RxQueue {
+    const fn new() -> Self {
+        Self {
+            bytes: heapless::Deque::new(),
+            dropped: 0,
+        }
+    }
+}
+
+/// USART1's (SCADA) and USART2's (VFD) receive queues, filled by their interrupts.
+static RX: [Mutex<RefCell<RxQueue>>; 2] = [
+    Mutex::new(RefCell::new(RxQueue::new())),
+    Mutex::new(RefCell::new(RxQueue::new())),
+];
+
+/// Moves every received byte of `regs` into `queue` (the interrupt handlers' body).
+fn receive_into(regs: &pac::usart1::RegisterBlock, queue: &Mutex<RefCell<RxQueue>>) {
+    free(|cs| {
+        let mut q = queue.borrow(cs).borrow_mut();
+        while regs.sr().read().rxne().bit_is_set() {
+            let byte = regs.dr().read().dr().bits() as u8;
+            if q.bytes.push_back(byte).is_err() {
+                q.dropped = q.dropped.wrapping_add(1);
+            }
+        }
+    });
+}
+
+#[interrupt]
+fn USART1() {
+    // SAFETY: a shared reference to the register block; the loop only writes DR/CR1 and
+    // reads SR, and reading DR here is what the receive interrupt is for.
+    receive_into(unsafe { &*pac::USART1::ptr() }, &RX[0]);
+}
+
+#[interrupt]
+fn USART2() {
+    // SAFETY: as for USART1.
+    receive_into(unsafe { &*pac::USART2::ptr() }, &RX[1]);
+}
+
+/// A USART under QEMU (its STM32F2xx USART model: a byte in DR, RXNE, TXE/TC always ready),
+/// receiving by interrupt into its [`RxQueue`], transmitting by polling.
+struct Usart {
+    regs: &'static pac::usart1::RegisterBlock,
+    rx: &'static Mutex<RefCell<RxQueue>>,
+}
 
 impl Usart {
-    fn new(regs: &'static pac::usart1::RegisterBlock, pclk_hz: u32) -> Self {
+    /// Sets the USART up (19 200 baud from `pclk_hz`, receive interrupt on) and unmasks its
+    /// interrupt `irq`.
+    fn new(
+        regs: &'static pac::usart1::RegisterBlock,
+        rx: &'static Mutex<RefCell<RxQueue>>,
+        irq: pac::Interrupt,
+        pclk_hz: u32,
+    ) -> Self {
         let brr = (pclk_hz + BAUD / 2) / BAUD;
         // SAFETY: BRR takes any 16-bit divider; this is the HAL's own computation.
         regs.brr().write(|w| unsafe { w.bits(brr as u16) });
-        regs.cr1()
-            .write(|w| w.ue().set_bit().te().set_bit().re().set_bit());
-        Self(regs)
+        regs.cr1().write(|w| {
+            w.ue()
+                .set_bit()
+                .te()
+                .set_bit()
+                .re()
+                .set_bit()
+                .rxneie()
+                .set_bit()
+        });
+        // SAFETY: the handler only touches its queue through a critical section.
+        unsafe { cortex_m::peripheral::NVIC::unmask(irq) };
+        Self { regs, rx }
     }
+
+    /// Bytes dropped because the receive queue was full.
+    fn dropped(&self) -> u32 {
+        rx_dropped(self.rx)
+    }
+}
+
+/// Bytes `queue` dropped because it was full.
+fn rx_dropped(queue: &Mutex<RefCell<RxQueue>>) -> u32 {
+    free(|cs| queue.borrow(cs).borrow().dropped)
 }
 
 impl Uart for Usart {
     fn try_read(&mut self) -> Option<u8> {
-        self.0
-            .sr()
-            .read()
-            .rxne()
-            .bit_is_set()
-            .then(|| self.0.dr().read().dr().bits() as u8)
+        free(|cs| self.rx.borrow(cs).borrow_mut().bytes.pop_front())
     }
     fn try_write(&mut self, byte: u8) -> bool {
-        if self.0.sr().read().txe().bit_is_clear() {
+        if self.regs.sr().read().txe().bit_is_clear() {
             return false;
         }
-        self.0.dr().write(|w| w.dr().set(u16::from(byte)));
+        self.regs.dr().write(|w| w.dr().set(u16::from(byte)));
         true
     }
     fn tx_complete(&mut self) -> bool {
-        self.0.sr().read().tc().bit_is_set()
+        self.regs.sr().read().tc().bit_is_set()
+    }
+}
+
+/// Milliseconds from TIM2 running free at 1 MHz (32 bits: wraps every 71 min, taken care of
+/// by counting differences). QEMU's STM32F2xx timer model counts its 1 GHz virtual clock
+/// divided by PSC + 1 (real time without `-icount`, one count per instruction with
+/// `-icount shift=0`), whatever the RCC says.
+pub struct Clock {
+    tim: pac::TIM2,
+    last: u32,
+    ms: u32,
+    rest_us: u32,
+}
+
+impl Clock {
+    /// QEMU's timer input clock, Hz.
+    const TIMER_HZ: u32 = 1_000_000_000;
+
+    /// Starts TIM2 from 0 at 1 MHz, no interrupts.
+    pub fn start(tim: pac::TIM2, rcc: &pac::RCC) -> Self {
+        rcc.apb1enr().modify(|_, w| w.tim2en().set_bit());
+        tim.psc()
+            .write(|w| w.psc().set((Self::TIMER_HZ / 1_000_000 - 1) as u16));
+        tim.arr().write(|w| w.arr().set(u32::MAX));
+        tim.egr().write(|w| w.ug().set_bit());
+        tim.cr1().modify(|_, w| w.cen().set_bit());
+        let last = tim.cnt().read().bits();
+        Self {
+            tim,
+            last,
+            ms: 0,
+            rest_us: 0,
+        }
+    }
+
+    /// Milliseconds since [`Self::start`] (wrapping).
+    pub fn now_ms(&mut self) -> u32 {
+        let cnt = self.tim.cnt().read().bits();
+        let us = cnt.wrapping_sub(self.last);
+        self.last = cnt;
+        let rest = self.rest_us + us % 1000;
+        self.ms = self
+            .ms
+            .wrapping_add(us / 1000)
+            .wrapping_add(u32::from(rest >= 1000));
+        self.rest_us = rest % 1000;
+        self.ms
     }
 }
 
@@ -141,11 +278,14 @@ fn command_line(buf: &mut [u8]) -> &str {
 
 /// The virtual bench as the board.
 struct QemuBoard {
+    clock: Clock,
     virt: VirtualIo,
     vfd_port: Option<RtuPort<Usart>>,
     out: hio::HostStream,
     run_ms: Option<u32>,
     failed: bool,
+    /// SCADA bytes dropped, as last logged.
+    scada_dropped: u32,
 }
 
 impl Io for QemuBoard {
@@ -175,6 +315,10 @@ impl Io for QemuBoard {
 }
 
 impl Board for QemuBoard {
+    fn now_ms(&mut self) -> u32 {
+        self.clock.now_ms()
+    }
+
     fn poll(&mut self, now_ms: u32) {
         if let Some(port) = &mut self.vfd_port {
             port.poll(now_ms);
@@ -190,9 +334,17 @@ impl Board for QemuBoard {
         if let Some(line) = log {
             let _ = line.write_text(&mut self.out);
             let _ = writeln!(self.out);
+            let dropped = rx_dropped(&RX[0]);
+            if dropped != self.scada_dropped {
+                self.scada_dropped = dropped;
+                let _ = writeln!(
+                    self.out,
+                    "SCADA: {dropped} received bytes dropped so far (queue full)"
+                );
+            }
         }
         match self.run_ms {
-            Some(end) => now_ms() < end,
+            Some(end) => self.clock.now_ms() < end,
             None => true,
         }
     }
@@ -264,10 +416,16 @@ fn start(out: &mut hio::HostStream) -> Result<(), ()> {
     // each is used by exactly one `Usart` from here on.
     let usart1: &'static pac::usart1::RegisterBlock = unsafe { &*pac::USART1::ptr() };
     let usart2: &'static pac::usart1::RegisterBlock = unsafe { &*pac::USART2::ptr() };
-    let mut scada = RtuPort::new(Usart::new(usart1, HSI_HZ), QEMU_IDLE_MS);
-    let vfd_port = args
-        .vfd_uart
-        .then(|| RtuPort::new(Usart::new(usart2, HSI_HZ), QEMU_IDLE_MS));
+    let mut scada = RtuPort::new(
+        Usart::new(usart1, &RX[0], pac::Interrupt::USART1, HSI_HZ),
+        QEMU_IDLE_MS,
+    );
+    let vfd_port = args.vfd_uart.then(|| {
+        RtuPort::new(
+            Usart::new(usart2, &RX[1], pac::Interrupt::USART2, HSI_HZ),
+            QEMU_IDLE_MS,
+        )
+    });
     let _ = writeln!(
         out,
         "firmware: virtual bench, SCADA unit 1 on USART1, VFD {}, mode={} setpoint={} seed={} narmax={}{}",
@@ -282,15 +440,22 @@ fn start(out: &mut hio::HostStream) -> Result<(), ()> {
         args.arithmetic.name(),
         if args.run_ms.is_some() { "" } else { ", runs until stopped" }
     );
+    let clock = Clock::start(dp.TIM2, &dp.RCC);
     let mut board = QemuBoard {
+        clock,
         virt,
         vfd_port,
         out: *out,
         run_ms: args.run_ms,
         failed: false,
+        scada_dropped: 0,
     };
     start_systick(cp.SYST, QEMU_SYSTICK_HZ);
     serve(&mut app, &mut scada, &mut board);
+    let dropped = scada.uart().dropped();
+    if dropped > 0 {
+        let _ = writeln!(out, "SCADA: {dropped} received bytes dropped (queue full)");
+    }
     let _ = writeln!(out, "done");
     if board.failed {
         Err(())

@@ -11,6 +11,8 @@
 //!
 //! Needs `qemu-system-arm` and `mbpoll` on the PATH (Debian packages of the same names).
 
+mod bridge;
+
 /// The firmware's NARMAX models, the very files it compiles in.
 #[path = "../../firmware/src/models/flow.rs"]
 mod flow_model;
@@ -395,11 +397,24 @@ fn qemu(args: &[String]) -> Result {
                 Err(format!("qemu: {status}"))
             };
         }
-        let (mut qemu, pty, _holder, _) = e2e::start_pty(cmd, true)?;
+        let (mut qemu, bridge, _) = e2e::start_pty(cmd, true)?;
+        let pty = bridge.path.clone();
         eprintln!(
             "SCADA slave (unit 1, RTU 19200 8N1) on {pty}; e.g.\n  mbpoll -m rtu -b 19200 -P none -a 1 -t 3 -r 1 -c 18 {pty}\n  mbpoll -m rtu -b 19200 -P none -a 1 -t 4 -r 1 -1 {pty} 5000 1"
         );
-        let status = qemu.0.wait().map_err(|e| format!("qemu: {e}"))?;
+        // Report what the line dropped (answers nobody read), when it changes.
+        let mut reported = 0;
+        let status = loop {
+            if let Some(status) = qemu.0.try_wait().map_err(|e| format!("qemu: {e}"))? {
+                break status;
+            }
+            std::thread::sleep(std::time::Duration::from_secs(1));
+            let dropped = bridge.stats.dropped();
+            if dropped != reported {
+                reported = dropped;
+                eprintln!("{}", bridge.stats.summary());
+            }
+        };
         return if status.success() {
             Ok(())
         } else {
@@ -420,7 +435,6 @@ fn qemu(args: &[String]) -> Result {
 mod e2e {
     use super::{qemu_command, Result};
     use std::io::{BufRead, BufReader, Write};
-    use std::os::unix::fs::OpenOptionsExt;
     use std::path::Path;
     use std::process::{Child, Command, Stdio};
     use std::time::{Duration, Instant};
@@ -462,20 +476,14 @@ mod e2e {
     }
 
     /// QEMU with its SCADA port on a pseudo-terminal, started: the process (killed when
-    /// dropped), the pty's path, a handle that holds the pty open, and QEMU's output lines
-    /// (also echoed to the terminal if `echo`).
-    ///
-    /// The handle matters: when the last process closes a pty's far end QEMU stops reading
-    /// it and looks again only once a second, so a client that opens the port anew for each
-    /// request (mbpoll does) could lose up to 1 s, more than its timeout. Held open, the port
-    /// stays connected between clients.
+    /// dropped), the [`bridge`](crate::bridge) that offers clients the port as a line (its
+    /// `path`), and QEMU's output lines (also echoed to the terminal if `echo`).
     pub fn start_pty(
         mut cmd: Command,
         echo: bool,
     ) -> Result<(
         Qemu,
-        String,
-        std::fs::File,
+        crate::bridge::Bridge,
         std::sync::mpsc::Receiver<String>,
     )> {
         cmd.stdin(Stdio::null())
@@ -520,21 +528,16 @@ mod e2e {
             started |= line.starts_with("firmware:");
         }
         let pty = pty.ok_or("no pty")?;
-        // O_NOCTTY (Linux): never become this process's controlling terminal.
-        let holder = std::fs::OpenOptions::new()
-            .read(true)
-            .write(true)
-            .custom_flags(0o400)
-            .open(&pty)
-            .map_err(|e| format!("{pty}: {e}"))?;
-        Ok((qemu, pty, holder, rx))
+        let bridge = crate::bridge::start(&pty)?;
+        Ok((qemu, bridge, rx))
     }
 
     pub fn run(elf: &Path) -> Result<String> {
         let mut cmd = qemu_command(elf, &["mode=0".into()]);
         cmd.args(["-display", "none", "-monitor", "none"])
             .args(["-serial", "pty", "-serial", "null"]);
-        let (qemu, pty, _holder, _) = start_pty(cmd, false)?;
+        let (qemu, bridge, _) = start_pty(cmd, false)?;
+        let pty = bridge.path.clone();
         let mut report = format!("SCADA on {pty}\n");
 
         // Read all input registers (FC 04).
@@ -609,8 +612,218 @@ mod e2e {
             ));
         }
         report.push_str("bad CRC and unit 2: silence; the next request answered\n");
+        crate::line::checks(&pty, &bridge, &mut report)?;
         drop(qemu);
         Ok(report)
+    }
+}
+
+/// The SCADA line under hostile clients (regressions of a hostile run): traffic must not slow
+/// the loop, a client that stops reading must not stop the controller, an answer nobody read
+/// must not reach the next client, and noise or back-to-back requests must be taken at the
+/// rate QEMU allows.
+mod line {
+    use super::Result;
+    use crate::bridge::Bridge;
+    use controller::scada::crc16;
+    use nix::fcntl::{open, OFlag};
+    use nix::poll::{poll, PollFd, PollFlags, PollTimeout};
+    use nix::sys::stat::Mode;
+    use nix::sys::termios::{cfmakeraw, tcgetattr, tcsetattr, SetArg};
+    use nix::unistd::{read, write};
+    use std::os::fd::{AsFd, OwnedFd};
+    use std::time::{Duration, Instant};
+
+    /// A raw client port.
+    struct Port(OwnedFd);
+
+    fn frame(body: &[u8]) -> Vec<u8> {
+        let mut f = body.to_vec();
+        f.extend_from_slice(&crc16(body).to_le_bytes());
+        f
+    }
+
+    impl Port {
+        fn open(path: &str) -> Result<Self> {
+            let fd = open(
+                path,
+                OFlag::O_RDWR | OFlag::O_NOCTTY | OFlag::O_NONBLOCK,
+                Mode::empty(),
+            )
+            .map_err(|e| format!("{path}: {e}"))?;
+            let mut t = tcgetattr(&fd).map_err(|e| e.to_string())?;
+            cfmakeraw(&mut t);
+            tcsetattr(&fd, SetArg::TCSANOW, &t).map_err(|e| e.to_string())?;
+            Ok(Self(fd))
+        }
+
+        /// Writes all of `bytes` (the port is non-blocking: waits while it is full).
+        fn send(&self, mut bytes: &[u8]) -> Result {
+            let end = Instant::now() + Duration::from_secs(5);
+            while !bytes.is_empty() {
+                match write(&self.0, bytes) {
+                    Ok(n) => bytes = &bytes[n..],
+                    Err(nix::errno::Errno::EAGAIN) if Instant::now() < end => {
+                        std::thread::sleep(Duration::from_millis(1))
+                    }
+                    Err(e) => return Err(format!("client write: {e}")),
+                }
+            }
+            Ok(())
+        }
+
+        /// Up to `n` bytes received within `timeout`.
+        fn recv(&self, n: usize, timeout: Duration) -> Vec<u8> {
+            let end = Instant::now() + timeout;
+            let mut got = Vec::new();
+            let mut buf = [0u8; 512];
+            while got.len() < n {
+                let left = end.saturating_duration_since(Instant::now());
+                if left.is_zero() {
+                    break;
+                }
+                let ms = left.as_millis().clamp(1, 1000) as u16;
+                let mut fds = [PollFd::new(self.0.as_fd(), PollFlags::POLLIN)];
+                if poll(&mut fds, PollTimeout::from(ms)).unwrap_or(0) > 0 {
+                    if let Ok(k) = read(&self.0, &mut buf) {
+                        got.extend_from_slice(&buf[..k]);
+                    }
+                }
+            }
+            got
+        }
+
+        /// Input registers `start..start + count` (FC 04), or `None` without a valid answer
+        /// within `timeout`.
+        fn inputs(&self, start: u16, count: u16, timeout: Duration) -> Result<Option<Vec<u16>>> {
+            let [a, b] = start.to_be_bytes();
+            self.send(&frame(&[1, 4, a, b, 0, count as u8]))?;
+            let n = 5 + 2 * usize::from(count);
+            let ans = self.recv(n, timeout);
+            let ok = ans.len() == n
+                && ans[..3] == [1, 4, 2 * count as u8]
+                && crc16(&ans[..n - 2]).to_le_bytes() == ans[n - 2..];
+            Ok(ok.then(|| {
+                ans[3..n - 2]
+                    .chunks(2)
+                    .map(|w| u16::from_be_bytes([w[0], w[1]]))
+                    .collect()
+            }))
+        }
+
+        /// The sample counter (input 9: +1 per 50 ms pressure sample).
+        fn samples(&self) -> Result<u16> {
+            self.inputs(9, 1, Duration::from_secs(1))?
+                .map(|r| r[0])
+                .ok_or_else(|| "no answer to a read of the sample counter".to_string())
+        }
+    }
+
+    pub fn checks(pty: &str, bridge: &Bridge, report: &mut String) -> Result {
+        // 1. Traffic does not slow the loop: 50 reads a second for 10 s, sample counter
+        //    (20 per second) against wall time.
+        let port = Port::open(pty)?;
+        let (s0, t0) = (port.samples()?, Instant::now());
+        let mut reads = 0;
+        while t0.elapsed() < Duration::from_secs(10) {
+            let t = Instant::now();
+            port.inputs(0, 18, Duration::from_secs(1))?
+                .ok_or("a read under traffic got no answer")?;
+            reads += 1;
+            std::thread::sleep(Duration::from_millis(20).saturating_sub(t.elapsed()));
+        }
+        let (s1, wall) = (port.samples()?, t0.elapsed().as_secs_f64());
+        let rate = f64::from(s1.wrapping_sub(s0)) / (wall * 20.0) - 1.0;
+        report.push_str(&format!(
+            "{reads} reads in {wall:.1} s ({:.0}/s): loop at {:+.2} % of wall time (sample counter)\n",
+            f64::from(reads) / wall,
+            rate * 100.0
+        ));
+        if rate.abs() > 0.01 {
+            return Err(format!(
+                "the loop's rate depends on traffic: {:+.2} % of wall time (limit ±1 %)\n{report}",
+                rate * 100.0
+            ));
+        }
+        // 2. Noise is taken fast: 2000 bytes, then a read is answered within 1 s.
+        port.send(&[0x55; 2000])?;
+        let t = Instant::now();
+        std::thread::sleep(Duration::from_millis(20));
+        port.inputs(17, 1, Duration::from_secs(1))?
+            .ok_or("no answer within 1 s to a read after 2000 bytes of noise")?;
+        report.push_str(&format!(
+            "2000 bytes of noise, then a read: answered {} ms after the noise\n",
+            t.elapsed().as_millis()
+        ));
+        // 3. Back-to-back writes, one every 10 ms (no 10 ms silence ever): all answered.
+        let mut answered = 0;
+        let t = Instant::now();
+        for i in 0..100u16 {
+            let next = t + Duration::from_millis(10 * u64::from(i));
+            std::thread::sleep(next.saturating_duration_since(Instant::now()));
+            let [a, b] = (i * 50).to_be_bytes();
+            let w = frame(&[1, 6, 0, 0, a, b]);
+            port.send(&w)?;
+            answered += usize::from(port.recv(8, Duration::from_millis(500)) == w);
+        }
+        report.push_str(&format!(
+            "100 setpoint writes, one every 10 ms: {answered} answered in {:.2} s\n",
+            t.elapsed().as_secs_f64()
+        ));
+        if answered != 100 {
+            return Err(format!(
+                "only {answered} of 100 back-to-back writes answered"
+            ));
+        }
+        drop(port);
+        // 4. A client that sends and never reads (answers pile up: 25 KB in 12 s) does not
+        //    stop the controller.
+        let flood = Port::open(pty)?;
+        let t = Instant::now();
+        let s0 = {
+            let p = Port::open(pty)?;
+            p.samples()?
+        };
+        let mut sent = 0;
+        while t.elapsed() < Duration::from_secs(12) {
+            flood.send(&frame(&[1, 4, 0, 0, 0, 18]))?;
+            sent += 1;
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        drop(flood);
+        std::thread::sleep(Duration::from_millis(100));
+        let after = Port::open(pty)?;
+        let s1 = after.samples()?;
+        let wall = t.elapsed().as_secs_f64();
+        let rate = f64::from(s1.wrapping_sub(s0)) / (wall * 20.0) - 1.0;
+        report.push_str(&format!(
+            "a client sent {sent} reads in 12 s and read none: the loop ran on at {:+.2} % of wall time; {}\n",
+            rate * 100.0,
+            bridge.stats.summary()
+        ));
+        if rate.abs() > 0.02 {
+            return Err(format!(
+                "the controller stalled under a client that does not read:\n{report}"
+            ));
+        }
+        drop(after);
+        // 5. An answer nobody read does not reach the next client: a read of input 17 sent,
+        //    the port closed unread; then a read of another shape gets its own answer.
+        for _ in 0..3 {
+            let gone = Port::open(pty)?;
+            gone.send(&frame(&[1, 4, 0, 17, 0, 1]))?;
+            drop(gone);
+            std::thread::sleep(Duration::from_millis(50));
+            let next = Port::open(pty)?;
+            // The stale answer (7 bytes) ahead of this one would spoil its header and CRC.
+            next.inputs(0, 18, Duration::from_secs(1))?.ok_or(
+                "after an unread answer, the next client's read got no valid answer of its own",
+            )?;
+        }
+        report.push_str(
+            "an answer left unread by a client that closed: not seen by the next client (3 of 3)\n",
+        );
+        Ok(())
     }
 }
 

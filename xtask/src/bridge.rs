@@ -1,0 +1,218 @@
+//! The SCADA port as a Modbus client sees it: a pseudo-terminal of xtask's own, bridged to
+//! QEMU's, that behaves like an RS-485 line.
+//!
+//! QEMU's `-serial pty` alone is no line:
+//! - when the last client closes it, QEMU stops reading it and looks again only once a second
+//!   (a client that opens the port per request, as mbpoll does, can time out);
+//! - held open between clients (as xtask once did), an answer nobody read stays queued, and
+//!   the next client reads it as the answer to its own request;
+//! - QEMU's USART model writes each byte with a blocking write: a client that stops reading
+//!   fills the pty and stops the whole emulated controller.
+//!
+//! So xtask holds QEMU's pty alone, always reading it, and offers clients a pty of its own:
+//! bytes from a client go to QEMU; bytes from QEMU go to the client if one is connected and
+//! has room, and are otherwise dropped and counted, as a line drops what nobody listens to.
+//! When a client closes its port, what it left unread is flushed, so the next client sees
+//! only answers to its own requests.
+
+use super::Result;
+use nix::fcntl::{open, OFlag};
+use nix::poll::{poll, PollFd, PollFlags, PollTimeout};
+use nix::pty::{grantpt, posix_openpt, ptsname_r, unlockpt, PtyMaster};
+use nix::sys::stat::Mode;
+use nix::sys::termios::{cfmakeraw, tcflush, tcgetattr, tcsetattr, FlushArg, SetArg};
+use nix::unistd::{read, write};
+use std::os::fd::{AsFd, OwnedFd};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::Arc;
+use std::time::Duration;
+
+/// Bytes from clients waiting for QEMU to take them; beyond this they are dropped (QEMU takes
+/// ≈ 14 bytes per ms, so this is seconds of input).
+const TO_QEMU_MAX: usize = 64 * 1024;
+
+/// What the bridge counted, shared with its owner.
+#[derive(Debug, Default)]
+pub struct Stats {
+    /// Bytes from clients handed to QEMU.
+    pub to_qemu: AtomicU64,
+    /// Bytes from QEMU handed to a client.
+    pub to_client: AtomicU64,
+    /// Bytes from QEMU dropped: no client connected.
+    pub dropped_no_client: AtomicU64,
+    /// Bytes from QEMU dropped: the client does not read (its port is full).
+    pub dropped_not_read: AtomicU64,
+    /// Bytes from clients dropped: QEMU did not take them in time.
+    pub dropped_to_qemu: AtomicU64,
+    /// Unread bytes flushed when a client closed its port.
+    pub flushed_on_close: AtomicU64,
+    /// Clients that connected and left.
+    pub sessions: AtomicU64,
+}
+
+impl Stats {
+    /// The counters, one line.
+    pub fn summary(&self) -> String {
+        let get = |c: &AtomicU64| c.load(Ordering::Relaxed);
+        format!(
+            "SCADA line: {} B to the controller, {} B to clients; dropped: {} B with no client connected, {} B the client did not read, {} B QEMU did not take; {} B left unread and flushed at {} client closes",
+            get(&self.to_qemu),
+            get(&self.to_client),
+            get(&self.dropped_no_client),
+            get(&self.dropped_not_read),
+            get(&self.dropped_to_qemu),
+            get(&self.flushed_on_close),
+            get(&self.sessions),
+        )
+    }
+
+    /// Bytes dropped in all (never delivered).
+    pub fn dropped(&self) -> u64 {
+        self.dropped_no_client.load(Ordering::Relaxed)
+            + self.dropped_not_read.load(Ordering::Relaxed)
+            + self.dropped_to_qemu.load(Ordering::Relaxed)
+    }
+}
+
+/// A running bridge: the clients' port and the counters. The thread ends when QEMU's pty
+/// closes or `stop` is set.
+pub struct Bridge {
+    /// The clients' serial device (`/dev/pts/N`).
+    pub path: String,
+    /// Counters.
+    pub stats: Arc<Stats>,
+    /// Set to end the bridge.
+    pub stop: Arc<AtomicBool>,
+}
+
+impl Drop for Bridge {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+    }
+}
+
+fn make_raw(fd: impl AsFd, what: &str) -> Result {
+    let mut t = tcgetattr(&fd).map_err(|e| format!("{what}: tcgetattr: {e}"))?;
+    cfmakeraw(&mut t);
+    tcsetattr(&fd, SetArg::TCSANOW, &t).map_err(|e| format!("{what}: tcsetattr: {e}"))
+}
+
+fn open_tty(path: &str) -> Result<OwnedFd> {
+    open(
+        path,
+        OFlag::O_RDWR | OFlag::O_NOCTTY | OFlag::O_NONBLOCK,
+        Mode::empty(),
+    )
+    .map_err(|e| format!("{path}: {e}"))
+}
+
+/// Bridges QEMU's pty at `qemu_pty` to a new pty for clients.
+pub fn start(qemu_pty: &str) -> Result<Bridge> {
+    let qemu = open_tty(qemu_pty)?;
+    make_raw(&qemu, qemu_pty)?;
+    let master = posix_openpt(OFlag::O_RDWR | OFlag::O_NOCTTY | OFlag::O_NONBLOCK)
+        .map_err(|e| format!("posix_openpt: {e}"))?;
+    grantpt(&master).map_err(|e| format!("grantpt: {e}"))?;
+    unlockpt(&master).map_err(|e| format!("unlockpt: {e}"))?;
+    let path = ptsname_r(&master).map_err(|e| format!("ptsname: {e}"))?;
+    {
+        // Raw from the start, for clients that do not set it; kept while the master is open.
+        let slave = open_tty(&path)?;
+        make_raw(&slave, &path)?;
+    }
+    let stats = Arc::new(Stats::default());
+    let stop = Arc::new(AtomicBool::new(false));
+    let (s, st, p) = (stats.clone(), stop.clone(), path.clone());
+    std::thread::spawn(move || run(qemu, master, &p, &s, &st));
+    Ok(Bridge { path, stats, stop })
+}
+
+/// `true` if a client has the pty's far end open (the master shows no hang-up).
+fn client_connected(master: &PtyMaster) -> bool {
+    let mut fds = [PollFd::new(master.as_fd(), PollFlags::empty())];
+    match poll(&mut fds, PollTimeout::ZERO) {
+        Ok(_) => !fds[0]
+            .revents()
+            .is_some_and(|r| r.contains(PollFlags::POLLHUP)),
+        Err(_) => false,
+    }
+}
+
+/// Drops what the last client left unread in its port's input queue.
+fn flush_unread(path: &str) -> u64 {
+    let Ok(slave) = open_tty(path) else { return 0 };
+    let mut n = 0u64;
+    let mut buf = [0u8; 4096];
+    while let Ok(k) = read(&slave, &mut buf) {
+        if k == 0 {
+            break;
+        }
+        n += k as u64;
+    }
+    let _ = tcflush(&slave, FlushArg::TCIOFLUSH);
+    n
+}
+
+fn run(qemu: OwnedFd, master: PtyMaster, path: &str, stats: &Stats, stop: &AtomicBool) {
+    let add = |c: &AtomicU64, n: usize| {
+        c.fetch_add(n as u64, Ordering::Relaxed);
+    };
+    let mut to_qemu: Vec<u8> = Vec::new();
+    let mut buf = [0u8; 4096];
+    let mut connected = false;
+    while !stop.load(Ordering::Relaxed) {
+        let now_connected = client_connected(&master);
+        if connected && !now_connected {
+            stats.sessions.fetch_add(1, Ordering::Relaxed);
+            stats
+                .flushed_on_close
+                .fetch_add(flush_unread(path), Ordering::Relaxed);
+            // A request left half-sent by the client that left is not the next one's.
+            to_qemu.clear();
+        }
+        connected = now_connected;
+        // Wait for QEMU's bytes (and the client's, if one is connected), at most 2 ms.
+        let mut fds = vec![PollFd::new(qemu.as_fd(), PollFlags::POLLIN)];
+        if connected {
+            fds.push(PollFd::new(master.as_fd(), PollFlags::POLLIN));
+        }
+        let timeout = PollTimeout::from(2u8);
+        if poll(&mut fds, timeout).is_err() {
+            std::thread::sleep(Duration::from_millis(2));
+            continue;
+        }
+        let ready = |i: usize| {
+            fds.get(i)
+                .and_then(PollFd::revents)
+                .is_some_and(|r| r.intersects(PollFlags::POLLIN | PollFlags::POLLHUP))
+        };
+        let (qemu_ready, client_ready) = (ready(0), ready(1));
+        drop(fds);
+        if client_ready {
+            if let Ok(n) = read(&master, &mut buf) {
+                let room = TO_QEMU_MAX.saturating_sub(to_qemu.len()).min(n);
+                to_qemu.extend_from_slice(&buf[..room]);
+                add(&stats.dropped_to_qemu, n - room);
+            }
+        }
+        if !to_qemu.is_empty() {
+            if let Ok(n) = write(&qemu, &to_qemu) {
+                add(&stats.to_qemu, n);
+                to_qemu.drain(..n);
+            }
+        }
+        if qemu_ready {
+            match read(&qemu, &mut buf) {
+                Ok(0) => return,
+                Ok(n) if connected => {
+                    let sent = write(&master, &buf[..n]).unwrap_or(0);
+                    add(&stats.to_client, sent);
+                    add(&stats.dropped_not_read, n - sent);
+                }
+                Ok(n) => add(&stats.dropped_no_client, n),
+                Err(nix::errno::Errno::EAGAIN) => {}
+                Err(_) => return,
+            }
+        }
+    }
+}
