@@ -1,6 +1,7 @@
 //! The bench controller firmware: the controller loop of the `controller` crate (SCADA Modbus
 //! slave, VFD Modbus master, 4-20 mA inputs, torque output, the white-box and NARMAX models)
-//! paced by a 1 ms SysTick, on one of two boards chosen by a cargo feature:
+//! run once per millisecond of the board's clock (SysTick wakes the core every 1 ms), on one
+//! of two boards chosen by a cargo feature:
 //!
 //! - `qemu` (default): QEMU `netduinoplus2` (STM32F405) with the on-chip virtual bench; text
 //!   logs over semihosting ([`qemu`]);
