@@ -283,9 +283,17 @@ pub fn request_complete(frame: &[u8]) -> bool {
 /// Where a whole request ([`request_complete`]) ends `bytes`, if one does: its start. On a
 /// line that marks no silence (QEMU's serial ports), a valid request that follows noise with
 /// no gap is still found this way. The odds that noise passes for a request are those of a
-/// valid CRC with a known function and length: about 2⁻²¹ per byte.
+/// valid CRC with a known function and length: about 2⁻²¹ per byte. While the bytes from
+/// the start may still become a whole request (a known function whose length is not reached
+/// yet), nothing inside them is taken for one, so a long write is never cut short by a
+/// request-like run of bytes in its data.
 pub fn request_at_end(bytes: &[u8]) -> Option<usize> {
     let n = bytes.len();
+    let growing = matches!(bytes.get(1), Some(1..=6 | 15 | 16))
+        && expected_len(bytes).is_none_or(|want| want > n);
+    if growing {
+        return None;
+    }
     // Fixed-length requests (01..06) are 8 bytes; 15 and 16 carry their byte count at 6.
     if n >= 8 && request_complete(&bytes[n - 8..]) {
         return Some(n - 8);
@@ -616,6 +624,20 @@ mod tests {
         }
         assert_eq!(request_at_end(&[0x55; 300]), None);
         assert_eq!(request_at_end(&[]), None);
+        // A long write whose data holds a valid read request is not cut at that request.
+        let inner = frame(&[1, 3, 0, 0, 0, 1]);
+        let mut body = vec![1, 16, 0, 0, 0, 8, 16];
+        body.extend_from_slice(&inner);
+        body.extend_from_slice(&[0; 8]);
+        let long = frame(&body);
+        for k in 1..long.len() {
+            assert_eq!(request_at_end(&long[..k]), None, "{k} bytes");
+        }
+        assert_eq!(request_at_end(&long), Some(0));
+        // A truncated request and a whole one right after it: the whole one is found.
+        let mut split = read[..5].to_vec();
+        split.extend_from_slice(&read);
+        assert_eq!(request_at_end(&split), Some(5));
     }
 
     #[test]

@@ -12,8 +12,10 @@
 //! So xtask holds QEMU's pty alone, always reading it, and offers clients a pty of its own:
 //! bytes from a client go to QEMU; bytes from QEMU go to the client if one is connected and
 //! has room, and are otherwise dropped and counted, as a line drops what nobody listens to.
-//! When a client closes its port, what it left unread is flushed, so the next client sees
-//! only answers to its own requests.
+//! When a client closes its port, what it left unread is flushed, and until QEMU has been
+//! silent for [`QUIET_MS`] after that (answers still on their way to the client that left are
+//! dropped), the next client's bytes wait; so a client sees only answers to its own requests,
+//! unless the controller took longer than [`QUIET_MS`] to answer the one that left.
 
 use super::Result;
 use nix::fcntl::{open, OFlag};
@@ -25,11 +27,15 @@ use nix::unistd::{read, write};
 use std::os::fd::{AsFd, OwnedFd};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 /// Bytes from clients waiting for QEMU to take them; beyond this they are dropped (QEMU takes
 /// ≈ 14 bytes per ms, so this is seconds of input).
 const TO_QEMU_MAX: usize = 64 * 1024;
+
+/// Silence from QEMU, after a client left, before the next client's bytes go through, ms. The
+/// controller answers within a few ms in real time; this covers a busy host.
+pub const QUIET_MS: u64 = 100;
 
 /// What the bridge counted, shared with its owner.
 #[derive(Debug, Default)]
@@ -44,8 +50,12 @@ pub struct Stats {
     pub dropped_not_read: AtomicU64,
     /// Bytes from clients dropped: QEMU did not take them in time.
     pub dropped_to_qemu: AtomicU64,
+    /// Bytes from clients dropped: the client closed its port before they were forwarded.
+    pub dropped_from_gone: AtomicU64,
     /// Unread bytes flushed when a client closed its port.
     pub flushed_on_close: AtomicU64,
+    /// Bytes from QEMU dropped after a client left: answers meant for it.
+    pub dropped_after_close: AtomicU64,
     /// Clients that connected and left.
     pub sessions: AtomicU64,
 }
@@ -55,12 +65,14 @@ impl Stats {
     pub fn summary(&self) -> String {
         let get = |c: &AtomicU64| c.load(Ordering::Relaxed);
         format!(
-            "SCADA line: {} B to the controller, {} B to clients; dropped: {} B with no client connected, {} B the client did not read, {} B QEMU did not take; {} B left unread and flushed at {} client closes",
+            "SCADA line: {} B to the controller, {} B to clients; dropped: {} B with no client connected, {} B answering a client that had left, {} B the client did not read, {} B QEMU did not take, {} B a client sent and closed before they went through; {} B left unread and flushed at {} client closes",
             get(&self.to_qemu),
             get(&self.to_client),
             get(&self.dropped_no_client),
+            get(&self.dropped_after_close),
             get(&self.dropped_not_read),
             get(&self.dropped_to_qemu),
+            get(&self.dropped_from_gone),
             get(&self.flushed_on_close),
             get(&self.sessions),
         )
@@ -69,8 +81,10 @@ impl Stats {
     /// Bytes dropped in all (never delivered).
     pub fn dropped(&self) -> u64 {
         self.dropped_no_client.load(Ordering::Relaxed)
+            + self.dropped_after_close.load(Ordering::Relaxed)
             + self.dropped_not_read.load(Ordering::Relaxed)
             + self.dropped_to_qemu.load(Ordering::Relaxed)
+            + self.dropped_from_gone.load(Ordering::Relaxed)
     }
 }
 
@@ -160,6 +174,9 @@ fn run(qemu: OwnedFd, master: PtyMaster, path: &str, stats: &Stats, stop: &Atomi
     let mut to_qemu: Vec<u8> = Vec::new();
     let mut buf = [0u8; 4096];
     let mut connected = false;
+    // Set when a client leaves: the last time QEMU was heard since (or the leaving).
+    let mut quarantine: Option<Instant> = None;
+    let quiet = Duration::from_millis(QUIET_MS);
     while !stop.load(Ordering::Relaxed) {
         let now_connected = client_connected(&master);
         if connected && !now_connected {
@@ -169,8 +186,22 @@ fn run(qemu: OwnedFd, master: PtyMaster, path: &str, stats: &Stats, stop: &Atomi
                 .fetch_add(flush_unread(path), Ordering::Relaxed);
             // A request left half-sent by the client that left is not the next one's.
             to_qemu.clear();
+            quarantine = Some(Instant::now());
         }
         connected = now_connected;
+        if !connected {
+            // Bytes a client wrote and closed on before they were read (open, write and close
+            // can all fall between two polls): its request, not the next client's.
+            while let Ok(n) = read(&master, &mut buf) {
+                if n == 0 {
+                    break;
+                }
+                add(&stats.dropped_from_gone, n);
+            }
+        }
+        if quarantine.is_some_and(|heard| heard.elapsed() >= quiet) {
+            quarantine = None;
+        }
         // Wait for QEMU's bytes (and the client's, if one is connected), at most 2 ms.
         let mut fds = vec![PollFd::new(qemu.as_fd(), PollFlags::POLLIN)];
         if connected {
@@ -195,7 +226,7 @@ fn run(qemu: OwnedFd, master: PtyMaster, path: &str, stats: &Stats, stop: &Atomi
                 add(&stats.dropped_to_qemu, n - room);
             }
         }
-        if !to_qemu.is_empty() {
+        if !to_qemu.is_empty() && quarantine.is_none() {
             if let Ok(n) = write(&qemu, &to_qemu) {
                 add(&stats.to_qemu, n);
                 to_qemu.drain(..n);
@@ -204,6 +235,10 @@ fn run(qemu: OwnedFd, master: PtyMaster, path: &str, stats: &Stats, stop: &Atomi
         if qemu_ready {
             match read(&qemu, &mut buf) {
                 Ok(0) => return,
+                Ok(n) if quarantine.is_some() => {
+                    add(&stats.dropped_after_close, n);
+                    quarantine = Some(Instant::now());
+                }
                 Ok(n) if connected => {
                     let sent = write(&master, &buf[..n]).unwrap_or(0);
                     add(&stats.to_client, sent);
