@@ -14,9 +14,10 @@
 //! The bench itself is the paper's white-box model in f64, integrated with RK4 at ≤ 1 ms.
 
 use crate::input::TorqueInput;
+use crate::num::Short;
 use crate::Failure;
 use model_core::excitation::SplitMix64;
-use model_core::{BenchState, Scheme, WhiteBox};
+use model_core::{BenchState, Scheme, WhiteBox, MAX_STEP_S};
 use std::io::Write;
 
 /// Transmitter model of one signal.
@@ -84,7 +85,18 @@ pub fn gaussian(rng: &mut SplitMix64) -> f64 {
     (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
 }
 
+/// Largest RK4 step of the bench, ms (each interval between input rows is split into equal
+/// steps no longer than this; a shorter interval is one step of its length).
+pub const STEP_MS: f64 = 1.0;
+
+/// What to do about an input that needs too many steps (see
+/// [`crate::input::read_input_to_integrate`]).
+pub const TOO_MANY_STEPS: &str = "bench-data integrates in steps of 1 ms: use a shorter input";
+
 /// Writes the synthetic record of `input`: one row per input row, the readings at that time.
+///
+/// The input's times are checked by [`crate::input::read_input_to_integrate`] with
+/// [`STEP_MS`], as `simulate` checks them.
 pub fn run(input: &TorqueInput, seed: u64, w: &mut dyn Write) -> Result<(), Failure> {
     let fail = |m: String| Failure {
         code: 1,
@@ -103,11 +115,13 @@ pub fn run(input: &TorqueInput, seed: u64, w: &mut dyn Write) -> Result<(), Fail
         if i > 0 {
             let u = input.torque_ref_pct[i - 1];
             let dt = input.t_s[i] - input.t_s[i - 1];
-            let n = (dt / 1e-3 - 1e-9).ceil().max(1.0) as u64;
+            let n = (dt / (STEP_MS * 1e-3) - 1e-9).ceil().max(1.0) as u64;
             let h = dt / n as f64;
             for _ in 0..n {
+                // One step of h (h <= 1 ms < MAX_STEP_S), also below model-core's 1 µs
+                // smallest step, as `simulate` integrates a short interval.
                 bench
-                    .step(&mut state, u, h, Scheme::Rk4)
+                    .advance(&mut state, u, h, MAX_STEP_S, Scheme::Rk4)
                     .map_err(|e| fail(format!("model: {e}")))?;
                 let sig = bench.signals(&state);
                 PRESSURE.lag(&mut p, sig.pressure_mca, h);
@@ -115,11 +129,13 @@ pub fn run(input: &TorqueInput, seed: u64, w: &mut dyn Write) -> Result<(), Fail
                 SPEED.lag(&mut s, sig.speed_rpm, h);
             }
         }
+        // Times and torques as given (shortest round-trip form); the readings at the
+        // resolution of a logger.
         writeln!(
             w,
             "{},{},{:.2},{:.4},{:.5}",
-            input.t_s[i],
-            input.torque_ref_pct[i],
+            Short(input.t_s[i]),
+            Short(input.torque_ref_pct[i]),
             SPEED.read(s, &mut rng),
             FLOW.read(q, &mut rng),
             PRESSURE.read(p, &mut rng)

@@ -1,5 +1,6 @@
 //! Reading bench CSV files: every error names the file, the line and the column.
 
+use crate::num::Short;
 use std::fmt;
 use std::path::{Path, PathBuf};
 
@@ -33,52 +34,143 @@ impl fmt::Display for InputError {
 
 impl std::error::Error for InputError {}
 
+/// Largest CSV file read, bytes (256 MiB; a one-hour `t_s,torque_ref_pct` input with a row per
+/// millisecond is 42 MB). A larger file, or a device or pipe that gives more, is refused once
+/// this much has been read.
+pub const MAX_CSV_BYTES: u64 = 256 << 20;
+
+/// `bytes` as a size in a message: `256 MiB`, `16 MiB`, `100 KiB`, `10 bytes`.
+pub fn size_text(bytes: u64) -> String {
+    if bytes >= 1 << 20 && bytes.is_multiple_of(1 << 20) {
+        format!("{} MiB", bytes >> 20)
+    } else if bytes >= 1 << 10 && bytes.is_multiple_of(1 << 10) {
+        format!("{} KiB", bytes >> 10)
+    } else {
+        format!("{bytes} bytes")
+    }
+}
+
+/// Reads the whole of `path`, but no more than `cap` bytes: a regular file longer than that is
+/// refused by its size without being read, anything else (a device such as /dev/zero, a pipe)
+/// once `cap + 1` bytes have come. The error is a one-line message without the path.
+pub fn read_bounded(path: &Path, cap: u64) -> Result<Vec<u8>, String> {
+    use std::io::Read;
+    let too_large = || format!("larger than {}, the limit for this input", size_text(cap));
+    let file = std::fs::File::open(path).map_err(|e| format!("cannot open: {e}"))?;
+    let meta = file.metadata().map_err(|e| format!("cannot open: {e}"))?;
+    if meta.is_dir() {
+        return Err("cannot read: it is a folder".into());
+    }
+    let mut bytes = Vec::new();
+    if meta.is_file() {
+        if meta.len() > cap {
+            return Err(too_large());
+        }
+        // The file may still grow while it is read: the cap below holds anyway.
+        bytes.reserve_exact(meta.len() as usize + 1);
+    }
+    file.take(cap.saturating_add(1))
+        .read_to_end(&mut bytes)
+        .map_err(|e| format!("cannot read: {e}"))?;
+    if bytes.len() as u64 > cap {
+        return Err(too_large());
+    }
+    Ok(bytes)
+}
+
 /// A CSV with a header row, from which some columns are read as finite numbers.
 pub struct NumericColumns {
-    /// One row per data record: the requested columns, in the requested order.
-    pub rows: Vec<Vec<f64>>,
+    /// The requested columns of every data record, row after row, in the requested order.
+    values: Vec<f64>,
+    /// Number of requested columns.
+    width: usize,
     /// 1-based line of each row (for later error messages).
     pub lines: Vec<u64>,
     /// 1-based column index of each requested column.
     pub columns: Vec<usize>,
 }
 
-/// Start offsets of the lines of `bytes` (terminated by `\n`, `\r\n` or a lone `\r`).
+impl NumericColumns {
+    /// The rows: the requested columns, in the requested order.
+    pub fn rows(&self) -> std::slice::ChunksExact<'_, f64> {
+        self.values.chunks_exact(self.width.max(1))
+    }
+
+    /// Number of rows.
+    pub fn len(&self) -> usize {
+        self.lines.len()
+    }
+}
+
+/// 1-based line numbers of byte offsets in `bytes` (lines end with `\n`, `\r\n` or a lone
+/// `\r`), counted as the offsets come, in increasing order (the csv crate's records and
+/// errors), so no table of line starts is kept.
 ///
 /// The csv crate's own line numbers are wrong after CRLF endings and blank lines
 /// (rust-csv #395, #208); its byte offsets are right, so lines are counted here.
-fn line_starts(bytes: &[u8]) -> Vec<usize> {
-    let mut starts = vec![0];
-    let mut i = 0;
-    while i < bytes.len() {
-        match bytes[i] {
-            b'\n' => starts.push(i + 1),
-            b'\r' if bytes.get(i + 1) != Some(&b'\n') => starts.push(i + 1),
-            _ => {}
+struct LineCounter<'a> {
+    bytes: &'a [u8],
+    /// Bytes before this offset are counted.
+    scanned: usize,
+    /// Line ends among them.
+    ends: u64,
+}
+
+impl<'a> LineCounter<'a> {
+    fn new(bytes: &'a [u8]) -> Self {
+        LineCounter {
+            bytes,
+            scanned: 0,
+            ends: 0,
         }
-        i += 1;
     }
-    starts
+
+    /// 1-based line of the record that the csv crate says starts at byte `offset`: its offset
+    /// can point at the end of the previous line (the `\n` of a CRLF) or at skipped blank
+    /// lines, so line terminators are stepped over first.
+    fn line_of(&mut self, offset: u64) -> u64 {
+        let bytes = self.bytes;
+        let mut at = usize::try_from(offset)
+            .unwrap_or(usize::MAX)
+            .min(bytes.len());
+        while at < bytes.len() && matches!(bytes[at], b'\r' | b'\n') {
+            at += 1;
+        }
+        if at < self.scanned {
+            // Not expected (offsets only grow), but right anyway: count again from the start.
+            self.scanned = 0;
+            self.ends = 0;
+        }
+        for i in self.scanned..at {
+            let end = match bytes[i] {
+                b'\n' => true,
+                b'\r' => bytes.get(i + 1) != Some(&b'\n'),
+                _ => false,
+            };
+            self.ends += u64::from(end);
+        }
+        self.scanned = at;
+        self.ends + 1
+    }
 }
 
-/// 1-based line of the record that the csv crate says starts at byte `offset`: its offset
-/// can point at the end of the previous line (the `\n` of a CRLF) or at skipped blank lines,
-/// so line terminators are stepped over first.
-fn line_of(bytes: &[u8], starts: &[usize], offset: u64) -> u64 {
-    let mut at = offset as usize;
-    while at < bytes.len() && matches!(bytes[at], b'\r' | b'\n') {
-        at += 1;
-    }
-    starts.partition_point(|&s| s <= at) as u64
-}
+/// Longest cell or header text shown in a message, characters.
+const SHOWN_CHARS: usize = 60;
 
-/// A cell or header as shown in a one-line message: control characters escaped.
+/// A cell or header as shown in a one-line message: control characters escaped, and cut after
+/// [`SHOWN_CHARS`] characters (`…` and the full length then follow).
 fn shown(text: &str) -> String {
-    text.escape_debug().to_string()
+    let n = text.chars().count();
+    if n <= SHOWN_CHARS {
+        return text.escape_debug().to_string();
+    }
+    let head: String = text.chars().take(SHOWN_CHARS).collect();
+    format!("{}… ({n} characters)", head.escape_debug())
 }
 
-/// Reads `path`, requiring the named columns (any order, other columns ignored) and parsing
-/// every cell of them as a finite number. Blank and whitespace-only lines are skipped.
+/// Reads `path` (at most [`MAX_CSV_BYTES`]), requiring the named columns (any order, other
+/// columns ignored, no column name twice in the header) and parsing every cell of them as a
+/// finite number. Blank and whitespace-only lines are skipped.
 pub fn read_columns(path: &Path, names: &[&str]) -> Result<NumericColumns, InputError> {
     let err = |line: Option<u64>, column: Option<(usize, String)>, message: String| InputError {
         path: path.to_path_buf(),
@@ -86,8 +178,8 @@ pub fn read_columns(path: &Path, names: &[&str]) -> Result<NumericColumns, Input
         column,
         message,
     };
-    let bytes = std::fs::read(path).map_err(|e| err(None, None, format!("cannot open: {e}")))?;
-    let starts = line_starts(&bytes);
+    let bytes = read_bounded(path, MAX_CSV_BYTES).map_err(|m| err(None, None, m))?;
+    let mut lines_of = LineCounter::new(&bytes);
     let mut reader = csv::ReaderBuilder::new()
         .has_headers(true)
         .trim(csv::Trim::All)
@@ -97,15 +189,33 @@ pub fn read_columns(path: &Path, names: &[&str]) -> Result<NumericColumns, Input
         .headers()
         .map_err(|e| err(Some(1), None, format!("cannot read the header: {e}")))?
         .clone();
-    let header_line = header
-        .position()
-        .map_or(1, |p| line_of(&bytes, &starts, p.byte()));
+    let header_line = header.position().map_or(1, |p| lines_of.line_of(p.byte()));
     if header.is_empty() || header.iter().all(|h| h.is_empty()) {
         return Err(err(
             Some(header_line),
             None,
             format!("empty file: expected a header row with {}", names.join(",")),
         ));
+    }
+    // Each name's first column, in one pass (a hostile header may have millions of columns).
+    let mut first_of = std::collections::HashMap::with_capacity(header.len());
+    for (i, h) in header.iter().enumerate() {
+        if h.is_empty() {
+            continue;
+        }
+        if let Some(&first) = first_of.get(h) {
+            return Err(err(
+                Some(header_line),
+                Some((i + 1, shown(h))),
+                format!(
+                    "column '{}' appears twice in the header (columns {} and {})",
+                    shown(h),
+                    first + 1,
+                    i + 1
+                ),
+            ));
+        }
+        first_of.insert(h, i);
     }
     let mut columns = Vec::with_capacity(names.len());
     for name in names {
@@ -123,7 +233,7 @@ pub fn read_columns(path: &Path, names: &[&str]) -> Result<NumericColumns, Input
             }
         }
     }
-    let mut rows = Vec::new();
+    let mut values = Vec::new();
     let mut lines = Vec::new();
     let mut record = csv::StringRecord::new();
     loop {
@@ -131,13 +241,11 @@ pub fn read_columns(path: &Path, names: &[&str]) -> Result<NumericColumns, Input
             Ok(false) => break,
             Ok(true) => {}
             Err(e) => {
-                let line = e.position().map(|p| line_of(&bytes, &starts, p.byte()));
+                let line = e.position().map(|p| lines_of.line_of(p.byte()));
                 return Err(err(line, None, format!("malformed row: {}", csv_kind(&e))));
             }
         }
-        let line = record
-            .position()
-            .map_or(0, |p| line_of(&bytes, &starts, p.byte()));
+        let line = record.position().map_or(0, |p| lines_of.line_of(p.byte()));
         if record.len() == 1 && record[0].is_empty() {
             continue; // a whitespace-only line
         }
@@ -152,7 +260,6 @@ pub fn read_columns(path: &Path, names: &[&str]) -> Result<NumericColumns, Input
                 ),
             ));
         }
-        let mut row = Vec::with_capacity(columns.len());
         for (&c, name) in columns.iter().zip(names) {
             let cell = record.get(c).unwrap_or("");
             let value: f64 = cell.parse().map_err(|_| {
@@ -169,12 +276,11 @@ pub fn read_columns(path: &Path, names: &[&str]) -> Result<NumericColumns, Input
                     format!("'{}' is not a finite number", shown(cell)),
                 ));
             }
-            row.push(value);
+            values.push(value);
         }
-        rows.push(row);
         lines.push(line);
     }
-    if rows.is_empty() {
+    if lines.is_empty() {
         return Err(err(
             Some(header_line + 1),
             None,
@@ -182,7 +288,8 @@ pub fn read_columns(path: &Path, names: &[&str]) -> Result<NumericColumns, Input
         ));
     }
     Ok(NumericColumns {
-        rows,
+        values,
+        width: names.len(),
         lines,
         columns: columns.iter().map(|c| c + 1).collect(),
     })
@@ -208,14 +315,15 @@ pub struct TorqueInput {
     pub torque_ref_pct: Vec<f64>,
 }
 
-/// Reads a `t_s,torque_ref_pct` file (other columns ignored) and checks it.
-pub fn read_torque_input(path: &Path) -> Result<TorqueInput, InputError> {
+/// Reads a `t_s,torque_ref_pct` file (other columns ignored) and checks it; returns it with
+/// the line of each row and the column of `t_s` (1-based).
+fn read_torque(path: &Path) -> Result<(TorqueInput, Vec<u64>, usize), InputError> {
     let data = read_columns(path, &["t_s", "torque_ref_pct"])?;
     let mut input = TorqueInput {
-        t_s: Vec::with_capacity(data.rows.len()),
-        torque_ref_pct: Vec::with_capacity(data.rows.len()),
+        t_s: Vec::with_capacity(data.len()),
+        torque_ref_pct: Vec::with_capacity(data.len()),
     };
-    for (row, &line) in data.rows.iter().zip(&data.lines) {
+    for (row, &line) in data.rows().zip(&data.lines) {
         let (t, u) = (row[0], row[1]);
         if let Some(&prev) = input.t_s.last() {
             if t <= prev {
@@ -223,7 +331,11 @@ pub fn read_torque_input(path: &Path) -> Result<TorqueInput, InputError> {
                     path: path.to_path_buf(),
                     line: Some(line),
                     column: Some((data.columns[0], "t_s".into())),
-                    message: format!("time {t} s is not after the previous row's {prev} s"),
+                    message: format!(
+                        "time {} s is not after the previous row's {} s",
+                        Short(t),
+                        Short(prev)
+                    ),
                 });
             }
         }
@@ -232,11 +344,60 @@ pub fn read_torque_input(path: &Path) -> Result<TorqueInput, InputError> {
                 path: path.to_path_buf(),
                 line: Some(line),
                 column: Some((data.columns[1], "torque_ref_pct".into())),
-                message: format!("torque reference {u} % is outside 0..100 %"),
+                message: format!("torque reference {} % is outside 0..100 %", Short(u)),
             });
         }
         input.t_s.push(t);
         input.torque_ref_pct.push(u);
+    }
+    let t_column = data.columns[0];
+    Ok((input, data.lines, t_column))
+}
+
+/// Most integration steps one run of the white-box bench may take (`simulate`, `bench-data`,
+/// the white-box runs of `study`): about 5 min of f64 RK4 on this machine. An input needing
+/// more is refused before any output, as a mistake in its times (or in `--step-ms`).
+pub const MAX_TOTAL_STEPS: f64 = 2e9;
+
+/// Integration steps for an interval of `dt_s` in steps no longer than `max_step_s` (at least
+/// one: any interval > 0 is integrated, however short).
+pub fn steps_for(dt_s: f64, max_step_s: f64) -> f64 {
+    (dt_s / max_step_s).ceil().max(1.0)
+}
+
+/// Reads a `t_s,torque_ref_pct` file (other columns ignored; `t_s` strictly increasing,
+/// torques within 0..=100 %) that is to be integrated in steps no longer than `max_step_ms`
+/// milliseconds, and refuses it if that needs more than [`MAX_TOTAL_STEPS`] steps, naming the
+/// row where the count passes the limit; `advice` ends that message.
+///
+/// The one rule on an input's times for every command that integrates one (`simulate`,
+/// `bench-data`, `study`): any interval > 0 is accepted, one shorter than a step being
+/// integrated in one step of its length.
+pub fn read_input_to_integrate(
+    path: &Path,
+    max_step_ms: f64,
+    advice: &str,
+) -> Result<TorqueInput, InputError> {
+    let max_step_s = max_step_ms * 1e-3;
+    let (input, lines, t_column) = read_torque(path)?;
+    let mut steps = 0.0;
+    for (k, pair) in input.t_s.windows(2).enumerate() {
+        steps += steps_for(pair[1] - pair[0], max_step_s);
+        if !(steps <= MAX_TOTAL_STEPS) {
+            return Err(InputError {
+                path: path.to_path_buf(),
+                line: Some(lines[k + 1]),
+                column: Some((t_column, "t_s".into())),
+                message: format!(
+                    "the input needs more than {} steps of {} ms to reach this row's time {} \
+                     s from {} s: {advice}",
+                    Short(MAX_TOTAL_STEPS),
+                    Short(max_step_ms),
+                    Short(pair[1]),
+                    Short(input.t_s[0])
+                ),
+            });
+        }
     }
     Ok(input)
 }
@@ -245,6 +406,10 @@ pub fn read_torque_input(path: &Path) -> Result<TorqueInput, InputError> {
 mod tests {
     use super::*;
     use std::io::Write;
+
+    fn read_torque_input(path: &Path) -> Result<TorqueInput, InputError> {
+        read_torque(path).map(|r| r.0)
+    }
 
     fn file(text: &str) -> tempfile::NamedTempFile {
         let mut f = tempfile::NamedTempFile::new().unwrap();
@@ -333,6 +498,99 @@ mod tests {
         assert_eq!(e.lines().count(), 1, "{e}");
         assert!(e.contains("'1\\n2' is not a number"), "{e}");
     }
+
+    #[test]
+    fn reading_stops_at_the_cap_for_files_devices_and_pipes() {
+        let f = file("0123456789");
+        assert_eq!(read_bounded(f.path(), 10).unwrap(), b"0123456789");
+        assert_eq!(
+            read_bounded(f.path(), 9).unwrap_err(),
+            "larger than 9 bytes, the limit for this input"
+        );
+        let e = read_bounded(Path::new("/dev/zero"), 4 << 10).unwrap_err();
+        assert_eq!(e, "larger than 4 KiB, the limit for this input");
+        // An endless pipe: refused after cap + 1 bytes; the writer then sees a broken pipe.
+        let dir = tempfile::tempdir().unwrap();
+        let fifo = dir.path().join("fifo");
+        nix::unistd::mkfifo(&fifo, nix::sys::stat::Mode::S_IRWXU).unwrap();
+        let writer = {
+            let fifo = fifo.clone();
+            std::thread::spawn(move || {
+                let mut w = std::fs::OpenOptions::new().write(true).open(fifo).unwrap();
+                let chunk = [b'1'; 4096];
+                let mut sent = 0usize;
+                while w.write_all(&chunk).is_ok() {
+                    sent += chunk.len();
+                }
+                sent
+            })
+        };
+        let e = read_bounded(&fifo, 100 << 10).unwrap_err();
+        assert!(e.starts_with("larger than 100 KiB"), "{e}");
+        let sent = writer.join().unwrap();
+        assert!(
+            sent < 1 << 20,
+            "the reader stopped early: {sent} bytes sent"
+        );
+        assert!(read_bounded(dir.path(), 10).unwrap_err().contains("folder"));
+        assert_eq!(size_text(MAX_CSV_BYTES), "256 MiB");
+    }
+
+    #[test]
+    fn a_column_name_twice_is_refused() {
+        assert_eq!(
+            error_of("t_s,torque_ref_pct,t_s\n0,1,2\n"),
+            "F:1:3 (t_s): column 't_s' appears twice in the header (columns 1 and 3)"
+        );
+        assert_eq!(
+            error_of("\nnote,t_s,note ,torque_ref_pct\na,0,b,1\n"),
+            "F:2:3 (note): column 'note' appears twice in the header (columns 1 and 3)"
+        );
+        // Empty names (trailing commas) are no names.
+        let f = file("t_s,torque_ref_pct,,\n0,1,,\n");
+        assert_eq!(read_torque_input(f.path()).unwrap().t_s, vec![0.0]);
+    }
+
+    #[test]
+    fn long_text_is_cut_in_messages() {
+        let e = error_of(&format!("t_s,torque_ref_pct\n0,{}\n", "9x".repeat(500)));
+        assert!(
+            e.ends_with(&format!(
+                "'{}… (1000 characters)' is not a number",
+                "9x".repeat(30)
+            )),
+            "{e}"
+        );
+        // The finite-number check shows the cell the same way (1000 nines overflow to inf).
+        let e = error_of(&format!("t_s,torque_ref_pct\n0,{}\n", "9".repeat(1000)));
+        assert!(
+            e.ends_with("… (1000 characters)' is not a finite number"),
+            "{e}"
+        );
+        assert_eq!(shown("a\nb"), "a\\nb");
+    }
+
+    #[test]
+    fn step_count_is_limited_and_located() {
+        let at_limit = file("t_s,torque_ref_pct\n0,10\n\n2e6,20\n");
+        let input = read_input_to_integrate(at_limit.path(), 1.0, "advice").unwrap();
+        assert_eq!(input.t_s, vec![0.0, 2e6]);
+        let over = file("t_s,torque_ref_pct\n0,10\n1e6,10\n\n2000000.001,20\n3e6,20\n");
+        let e = read_input_to_integrate(over.path(), 1.0, "advice")
+            .unwrap_err()
+            .to_string()
+            .replace(&over.path().display().to_string(), "F");
+        assert_eq!(
+            e,
+            "F:5:1 (t_s): the input needs more than 2e9 steps of 1 ms to reach this row's time \
+             2000000.001 s from 0 s: advice"
+        );
+        // Any interval > 0 is one step at least, however short.
+        let tiny = file("t_s,torque_ref_pct\n0,10\n5e-324,20\n1e-7,30\n");
+        assert!(read_input_to_integrate(tiny.path(), 1.0, "").is_ok());
+        assert_eq!(steps_for(5e-324, 1e-3), 1.0);
+        assert_eq!(steps_for(0.0105, 1e-3), 11.0);
+    }
 }
 
 /// A uniformly sampled record: times, torque and optionally one output column.
@@ -356,15 +614,13 @@ pub const MAX_JITTER: f64 = 0.1;
 /// that times are strictly increasing and uniformly spaced (every step within 10 % of the
 /// median step).
 pub fn read_series(path: &Path, y_column: &str, required: bool) -> Result<Series, InputError> {
-    let input = read_torque_input(path)?;
+    let (input, lines, _) = read_torque(path)?;
     let with_y = match read_columns(path, &["t_s", y_column]) {
         Ok(d) => Some(d),
         Err(e) if !required && e.message.starts_with("missing column") => None,
         Err(e) => return Err(e),
     };
-    let y = with_y
-        .as_ref()
-        .map(|d| d.rows.iter().map(|r| r[1]).collect());
+    let y = with_y.as_ref().map(|d| d.rows().map(|r| r[1]).collect());
     // Gaps are judged against the median step (one gap or extra sample does not move it);
     // the period reported is the mean step, span / (n − 1), equal to it for accepted data.
     let mut steps: Vec<f64> = input.t_s.windows(2).map(|p| p[1] - p[0]).collect();
@@ -376,19 +632,34 @@ pub fn read_series(path: &Path, y_column: &str, required: bool) -> Result<Series
     } else {
         0.0
     };
-    let lines = read_columns(path, &["t_s"])?.lines;
+    let bad = |line: u64, message: String| InputError {
+        path: path.to_path_buf(),
+        line: Some(line),
+        column: None,
+        message,
+    };
     for (pair, &line) in input.t_s.windows(2).zip(&lines[1..]) {
         let d = pair[1] - pair[0];
-        if (d - ts).abs() > MAX_JITTER * ts {
-            return Err(InputError {
-                path: path.to_path_buf(),
-                line: Some(line),
-                column: None,
-                message: format!(
-                    "not uniformly sampled: step {d} s where the median step is {ts} s"
+        if !((d - ts).abs() <= MAX_JITTER * ts) {
+            return Err(bad(
+                line,
+                format!(
+                    "not uniformly sampled: step {} s where the median step is {} s",
+                    Short(d),
+                    Short(ts)
                 ),
-            });
+            ));
         }
+    }
+    if !mean_step.is_finite() {
+        return Err(bad(
+            lines[n - 1],
+            format!(
+                "the times span {} s to {} s: more than an f64 holds",
+                Short(input.t_s[0]),
+                Short(input.t_s[n - 1])
+            ),
+        ));
     }
     Ok(Series {
         t_s: input.t_s,

@@ -1,7 +1,9 @@
 //! `pumpbench`: the host tool for the pump bench models.
 //!
 //! Exit codes: 0 success; 2 bad command line or bad input file (one-line error on stderr,
-//! no output file left behind); 1 any other failure (e.g. the output cannot be written).
+//! no output file left behind), including an output that is one of the inputs or that cannot
+//! be written (checked before any input is read); 1 any other failure (e.g. writing the output
+//! fails part way).
 
 // `!(x > 0.0)` is deliberate: unlike `x <= 0.0` it is also true for NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
@@ -12,6 +14,7 @@ mod export;
 mod input;
 mod modelfile;
 mod narmaxcmd;
+mod num;
 mod output;
 mod plots;
 mod simulate;
@@ -20,7 +23,7 @@ mod train;
 mod vfdsim;
 
 use clap::{Parser, Subcommand, ValueEnum};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 /// Models of the UFMG pump test bench: simulate them, find their steady states.
@@ -338,6 +341,14 @@ macro_rules! with_narmax {
     };
 }
 
+/// [`output::check_outputs`] for an optional `--output` (stdout if `None`: nothing to check).
+fn check_optional_output(inputs: &[output::Named], out: Option<&Path>) -> Result<(), Failure> {
+    match out {
+        Some(out) => output::check_outputs(inputs, &[("--output", out)]),
+        None => Ok(()),
+    }
+}
+
 fn run(cli: Cli) -> Result<(), Failure> {
     match cli.command {
         Command::Identify {
@@ -353,6 +364,7 @@ fn run(cli: Cli) -> Result<(), Failure> {
             starts,
             output,
         } => {
+            output::check_outputs(&[("--data", &data)], &[("--output", &output)])?;
             let o = narmaxcmd::Identify {
                 starts: starts as usize,
                 data: &data,
@@ -382,7 +394,7 @@ fn run(cli: Cli) -> Result<(), Failure> {
                 None => None,
                 Some(p) => {
                     let cols = input::read_columns(p, &["torque_ref_pct", m.target.column()])?;
-                    Some(cols.rows.iter().map(|r| (r[0], r[1])).collect::<Vec<_>>())
+                    Some(cols.rows().map(|r| (r[0], r[1])).collect::<Vec<_>>())
                 }
             };
             let v = with_narmax!(m, precision, |model| narmaxcmd::validate(
@@ -416,13 +428,18 @@ fn run(cli: Cli) -> Result<(), Failure> {
                 || min_pct > max_pct
             {
                 return Err(Failure::usage(format!(
-                    "--min-pct {min_pct} and --max-pct {max_pct} must satisfy 0 <= min <= max <= 100"
+                    "--min-pct {} and --max-pct {} must satisfy 0 <= min <= max <= 100",
+                    num::Short(min_pct),
+                    num::Short(max_pct)
                 )));
             }
             if min_hold_s > max_hold_s {
                 return Err(Failure::usage(
                     "--min-hold-s must be <= --max-hold-s".into(),
                 ));
+            }
+            if let Some(out) = &output {
+                output::check_outputs(&[], &[("--output", out)])?;
             }
             if seconds / (ts_ms * 1e-3) > 1e8 {
                 return Err(Failure::usage(
@@ -460,6 +477,7 @@ fn run(cli: Cli) -> Result<(), Failure> {
             },
         ),
         Command::Export { weights, output } => {
+            check_optional_output(&[("--weights", &weights)], output.as_deref())?;
             let m = modelfile::ModelFile::read(&weights)?;
             let source = weights.display().to_string();
             output::write_csv(output.as_deref(), |w| export::run(&m, &source, w))
@@ -469,7 +487,12 @@ fn run(cli: Cli) -> Result<(), Failure> {
             seed,
             output,
         } => {
-            let data = input::read_torque_input(&input)?;
+            check_optional_output(&[("--input", &input)], output.as_deref())?;
+            let data = input::read_input_to_integrate(
+                &input,
+                benchdata::STEP_MS,
+                benchdata::TOO_MANY_STEPS,
+            )?;
             output::write_csv(output.as_deref(), |w| benchdata::run(&data, seed, w))
         }
         Command::Study {
@@ -513,9 +536,12 @@ fn run(cli: Cli) -> Result<(), Failure> {
             step_ms,
             input,
             output,
-            ..
+            weights,
         } => {
-            let data = input::read_torque_input(&input)?;
+            let mut inputs = vec![("--input", input.as_path())];
+            inputs.extend(weights.as_deref().map(|w| ("--weights", w)));
+            check_optional_output(&inputs, output.as_deref())?;
+            let data = input::read_input_to_integrate(&input, step_ms, simulate::TOO_MANY_STEPS)?;
             let step_s = step_ms * 1e-3;
             output::write_csv(output.as_deref(), |w| match precision {
                 Precision::F64 => simulate::whitebox::<f64, _>(&data, step_s, w),
@@ -533,6 +559,9 @@ fn run(cli: Cli) -> Result<(), Failure> {
             output,
             ..
         } => {
+            let mut inputs = vec![("--input", input.as_path())];
+            inputs.extend(weights.as_deref().map(|w| ("--weights", w)));
+            check_optional_output(&inputs, output.as_deref())?;
             let m = need_weights(weights)?;
             let series = narmaxcmd::read_for_model(&m, &input, false)?;
             with_narmax!(m, precision, |model| output::write_csv(
@@ -545,8 +574,14 @@ fn run(cli: Cli) -> Result<(), Failure> {
             precision,
             torque_pct,
             output,
-            ..
+            weights,
         } => {
+            let inputs: Vec<output::Named> = weights
+                .as_deref()
+                .map(|w| ("--weights", w))
+                .into_iter()
+                .collect();
+            check_optional_output(&inputs, output.as_deref())?;
             let torques = simulate::parse_torque_list(&torque_pct).map_err(Failure::usage)?;
             output::write_csv(output.as_deref(), |w| match precision {
                 Precision::F64 => simulate::steady::<f64, _>(&torques, w),
@@ -563,6 +598,12 @@ fn run(cli: Cli) -> Result<(), Failure> {
             torque_pct,
             output,
         } => {
+            let inputs: Vec<output::Named> = weights
+                .as_deref()
+                .map(|w| ("--weights", w))
+                .into_iter()
+                .collect();
+            check_optional_output(&inputs, output.as_deref())?;
             let m = need_weights(weights)?;
             let torques = simulate::parse_torque_list(&torque_pct).map_err(Failure::usage)?;
             with_narmax!(m, precision, |model| output::write_csv(

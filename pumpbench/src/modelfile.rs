@@ -1,6 +1,7 @@
 //! The NARMAX model file (JSON): weights in NNSYSID layout, scaling, lags, sample period,
 //! target, and training metadata. Checked when read: a bad file is refused before any run.
 
+use crate::num::Short;
 use crate::Failure;
 use model_core::narmax::{Lags, Narmax, Scaling};
 use model_core::Real;
@@ -9,6 +10,21 @@ use std::path::Path;
 
 /// Format tag written in every model file.
 pub const FORMAT: &str = "pumpbench-narmax-1";
+
+/// Largest model file read, bytes (16 MiB; the shipped models are under 5 KB, and even a
+/// model with the most weights the host allows and a long training history is far smaller).
+/// A larger file, or a device or pipe that gives more, is refused once this much has been
+/// read.
+pub const MAX_MODEL_BYTES: u64 = 16 << 20;
+
+/// Largest magnitude of a value in a model file (weights, scaling, ranges): f32::MAX / 1e6,
+/// so that the firmware's f32 arithmetic has room above every value.
+pub const MAX_ABS_VALUE: f64 = f32::MAX as f64 / 1e6;
+
+/// Whether `x` is finite and within ±[`MAX_ABS_VALUE`].
+pub fn in_firmware_range(x: f64) -> bool {
+    x.abs() <= MAX_ABS_VALUE
+}
 
 /// Capacity of the host's NARMAX models: regressors.
 pub const HOST_MAX_INPUTS: usize = 64;
@@ -137,9 +153,8 @@ impl ModelFile {
 
     /// Reads and checks a model file.
     pub fn read(path: &Path) -> Result<Self, Failure> {
-        let text =
-            std::fs::read_to_string(path).map_err(|e| bad(path, format!("cannot read: {e}")))?;
-        let m: ModelFile = serde_json::from_str(&text).map_err(|e| {
+        let bytes = crate::input::read_bounded(path, MAX_MODEL_BYTES).map_err(|e| bad(path, e))?;
+        let m: ModelFile = serde_json::from_slice(&bytes).map_err(|e| {
             bad(
                 path,
                 format!(
@@ -189,11 +204,14 @@ impl ModelFile {
                 .flatten()
                 .chain(&m.w2)
                 .chain(&scalars)
-                .find(|x| !(x.abs() <= f64::from(f32::MAX) / 1e6))
+                .find(|&&x| !in_firmware_range(x))
         {
             return Err(bad(
                 path,
-                format!("value {x:e} is out of range for the firmware's f32 arithmetic"),
+                format!(
+                    "value {} is out of range for the firmware's f32 arithmetic",
+                    Short(*x)
+                ),
             ));
         }
         m.build::<f32>().map_err(|e| bad(path, e))?;

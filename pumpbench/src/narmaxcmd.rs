@@ -2,8 +2,10 @@
 
 use crate::input::{read_series, Series};
 use crate::modelfile::{
-    HostNarmax, HostNarmaxQ, LagsFile, ModelFile, ScalingFile, Target, Training, FORMAT,
+    in_firmware_range, HostNarmax, HostNarmaxQ, LagsFile, ModelFile, ScalingFile, Target, Training,
+    FORMAT, MAX_ABS_VALUE,
 };
+use crate::num::Short;
 use crate::train::{identify, Data, Structure};
 use crate::Failure;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -85,12 +87,37 @@ pub fn run_identify(o: &Identify) -> Result<ModelFile, Failure> {
     }
     let (um, us) = mean_std(&series.torque_ref_pct);
     let (ym, ys) = mean_std(&y);
-    if !(us > 0.0) || !(ys > 0.0) {
-        return Err(usage(format!(
-            "{}: torque or {} is constant: nothing to identify",
+    let (u_range, y_range) = (range(&series.torque_ref_pct), range(&y));
+    for (column, mean, std, r) in [
+        ("torque_ref_pct", um, us, u_range),
+        (o.target.column(), ym, ys, y_range),
+    ] {
+        let what = format!(
+            "{}: {column} (from {} to {})",
             o.data.display(),
-            o.target.column()
-        )));
+            Short(r[0]),
+            Short(r[1])
+        );
+        if !mean.is_finite() || !std.is_finite() {
+            return Err(usage(format!(
+                "{what}: its mean or spread overflows f64 (standard deviation not finite): \
+                 nothing can be scaled"
+            )));
+        }
+        if let Some(x) = [mean, std, r[0], r[1]]
+            .into_iter()
+            .find(|&x| !in_firmware_range(x))
+        {
+            return Err(usage(format!(
+                "{what}: {} is out of range for a model file (|value| <= {}, the firmware's \
+                 f32 arithmetic)",
+                Short(x),
+                Short(MAX_ABS_VALUE)
+            )));
+        }
+        if !(std > 0.0) {
+            return Err(usage(format!("{what} is constant: nothing to identify")));
+        }
     }
     let u_scaled: Vec<f64> = series
         .torque_ref_pct
@@ -138,8 +165,8 @@ pub fn run_identify(o: &Identify) -> Result<ModelFile, Failure> {
         w2: trained.weights.w2.clone(),
         u_scaling: ScalingFile { mean: um, std: us },
         y_scaling: ScalingFile { mean: ym, std: ys },
-        u_range: range(&series.torque_ref_pct),
-        y_range: range(&y),
+        u_range,
+        y_range,
         training: Training {
             data: o.data.display().to_string(),
             samples: n,
@@ -185,8 +212,8 @@ pub fn read_for_model(m: &ModelFile, path: &Path, need_y: bool) -> Result<Series
         return Err(usage(format!(
             "{}: sampled every {} s but the model was identified at {} s",
             path.display(),
-            s.sample_period_s,
-            m.sample_period_s
+            Short(s.sample_period_s),
+            Short(m.sample_period_s)
         )));
     }
     Ok(s)
@@ -296,7 +323,10 @@ pub fn free_run<M: HostModel>(m: &M, series: &Series) -> Result<Vec<f64>, Failur
 pub fn steady_of<M: HostModel>(m: &M, u: f64) -> Result<f64, Failure> {
     m.steady(u).ok_or_else(|| Failure {
         code: 1,
-        message: format!("the model does not settle under a constant torque of {u} %"),
+        message: format!(
+            "the model does not settle under a constant torque of {} %",
+            Short(u)
+        ),
     })
 }
 
@@ -315,7 +345,7 @@ pub fn simulate<M: HostModel>(
     let y = free_run(model, series)?;
     writeln!(w, "t_s,torque_ref_pct,{}", m.target.column()).map_err(io)?;
     for ((t, u), v) in series.t_s.iter().zip(&series.torque_ref_pct).zip(&y) {
-        writeln!(w, "{t},{u},{v}").map_err(io)?;
+        writeln!(w, "{},{},{}", Short(*t), Short(*u), Short(*v)).map_err(io)?;
     }
     Ok(())
 }
@@ -331,19 +361,19 @@ pub fn steady<M: HostModel>(
     let outside: Vec<String> = torques
         .iter()
         .filter(|&&u| u < m.u_range[0] || u > m.u_range[1])
-        .map(|u| u.to_string())
+        .map(|&u| Short(u).to_string())
         .collect();
     if !outside.is_empty() {
         eprintln!(
             "pumpbench: torque {} % outside the training range {}..{} %: the input is clamped to it",
             outside.join(", "),
-            m.u_range[0],
-            m.u_range[1]
+            Short(m.u_range[0]),
+            Short(m.u_range[1])
         );
     }
     for &u in torques {
         let y = steady_of(model, u)?;
-        writeln!(w, "{u},{y}").map_err(io)?;
+        writeln!(w, "{},{}", Short(u), Short(y)).map_err(io)?;
     }
     Ok(())
 }
@@ -466,5 +496,31 @@ mod tests {
         .unwrap();
         let e = crate::input::read_series(&bad, "flow_lps", true).unwrap_err();
         assert_eq!(e.line, Some(4));
+    }
+
+    #[test]
+    fn times_wider_than_an_f64_are_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let wide = dir.path().join("wide.csv");
+        std::fs::write(
+            &wide,
+            "t_s,torque_ref_pct,flow_lps\n-1e308,10,1\n0,10,1\n1e308,10,1\n",
+        )
+        .unwrap();
+        let e = crate::input::read_series(&wide, "flow_lps", true).unwrap_err();
+        assert_eq!(e.line, Some(4));
+        assert_eq!(
+            e.message,
+            "the times span -1e308 s to 1e308 s: more than an f64 holds"
+        );
+        let inf_step = dir.path().join("inf_step.csv");
+        std::fs::write(
+            &inf_step,
+            "t_s,torque_ref_pct,flow_lps\n-1.7e308,10,1\n1.7e308,10,1\n",
+        )
+        .unwrap();
+        let e = crate::input::read_series(&inf_step, "flow_lps", true).unwrap_err();
+        assert_eq!(e.line, Some(3));
+        assert!(e.message.contains("step inf s"), "{}", e.message);
     }
 }

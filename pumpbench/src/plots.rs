@@ -243,15 +243,23 @@ fn static_figure(
     Ok(())
 }
 
+/// The figures [`figures`] writes.
+pub const FIGURES: [&str; 4] = [
+    "fig4_narmax_validation.png",
+    "fig5_narmax_static.png",
+    "fig7_whitebox_validation.png",
+    "fig8_whitebox_static.png",
+];
+
 /// Writes fig4_narmax_validation.png, fig5_narmax_static.png, fig7_whitebox_validation.png
-/// and fig8_whitebox_static.png into `dir`.
+/// and fig8_whitebox_static.png ([`FIGURES`]) into `dir`.
 pub fn figures(dir: &Path, p: &TargetResult, q: &TargetResult) -> Result<(), Failure> {
     font()?;
     let fail = |name: &str, e: Box<dyn Error>| Failure {
         code: 1,
         message: format!("cannot draw {}: {e}", dir.join(name).display()),
     };
-    let name = "fig4_narmax_validation.png";
+    let name = FIGURES[0];
     validation_figure(
         &dir.join(name),
         "NARMAX models, free run on the validation records (cf. paper Fig. 4)",
@@ -259,7 +267,7 @@ pub fn figures(dir: &Path, p: &TargetResult, q: &TargetResult) -> Result<(), Fai
         "NARMAX free run",
     )
     .map_err(|e| fail(name, e))?;
-    let name = "fig5_narmax_static.png";
+    let name = FIGURES[1];
     static_figure(
         &dir.join(name),
         "NARMAX models, static curves (cf. paper Fig. 5)",
@@ -267,7 +275,7 @@ pub fn figures(dir: &Path, p: &TargetResult, q: &TargetResult) -> Result<(), Fai
         "NARMAX steady output",
     )
     .map_err(|e| fail(name, e))?;
-    let name = "fig7_whitebox_validation.png";
+    let name = FIGURES[2];
     validation_figure(
         &dir.join(name),
         "White-box model on the validation records (cf. paper Fig. 7)",
@@ -275,7 +283,7 @@ pub fn figures(dir: &Path, p: &TargetResult, q: &TargetResult) -> Result<(), Fai
         "white-box model",
     )
     .map_err(|e| fail(name, e))?;
-    let name = "fig8_whitebox_static.png";
+    let name = FIGURES[3];
     static_figure(
         &dir.join(name),
         "White-box model, static curves (cf. paper Fig. 8)",

@@ -1,10 +1,11 @@
 //! The `simulate` and `steady` commands for the white-box model.
 
 use crate::input::TorqueInput;
+use crate::num::Float;
+use crate::num::Short;
 use crate::Failure;
 use indicatif::{ProgressBar, ProgressStyle};
 use model_core::{Real, Scheme, Signals, WhiteBox};
-use std::fmt::Display;
 use std::io::Write;
 
 fn write_fail(e: std::io::Error) -> Failure {
@@ -21,33 +22,21 @@ fn model_fail(e: model_core::BenchError) -> Failure {
     }
 }
 
-/// Most RK4 steps one `simulate` may take (≈ 5 min of f64 on this machine); more is refused
-/// before any output, as a mistake in the input or in --step-ms.
-pub const MAX_TOTAL_STEPS: f64 = 2e9;
+/// What to do about an input that needs too many steps (see
+/// [`crate::input::read_input_to_integrate`]).
+pub const TOO_MANY_STEPS: &str = "use a larger --step-ms or a shorter input";
 
 /// Simulates `input` with the white-box bench in `T` arithmetic, RK4, steps ≤ `step_s`.
-pub fn whitebox<T: Real + Display, W: Write + ?Sized>(
+///
+/// The input's times are checked by [`crate::input::read_input_to_integrate`] (at most
+/// [`crate::input::MAX_TOTAL_STEPS`] steps).
+pub fn whitebox<T: Real + Float, W: Write + ?Sized>(
     input: &TorqueInput,
     step_s: f64,
     w: &mut W,
 ) -> Result<(), Failure> {
     let bench = WhiteBox::<T>::paper();
     let n = input.t_s.len();
-    let steps: f64 = input
-        .t_s
-        .windows(2)
-        .map(|p| ((p[1] - p[0]) / step_s).ceil())
-        .sum();
-    if steps > MAX_TOTAL_STEPS {
-        return Err(Failure {
-            code: 2,
-            message: format!(
-                "the input needs {steps:.3e} steps of {} ms (more than {MAX_TOTAL_STEPS:e}): \
-                 use a larger --step-ms or a shorter input",
-                step_s * 1e3
-            ),
-        });
-    }
     let mut state = bench
         .steady_state(T::from_f64(input.torque_ref_pct[0]))
         .map_err(model_fail)?;
@@ -82,16 +71,16 @@ pub fn whitebox<T: Real + Display, W: Write + ?Sized>(
         writeln!(
             w,
             "{},{},{},{},{},{},{},{},{},{},{}",
-            input.t_s[i],
-            input.torque_ref_pct[i],
-            s.speed_rpm,
-            s.flow_lps,
-            s.pressure_mca,
-            s.speed_rad_s,
-            s.pump_head_mca,
-            s.pipe_loss_mca,
-            s.electromagnetic_torque_pct,
-            s.load_torque_pct,
+            Short(input.t_s[i]),
+            Short(input.torque_ref_pct[i]),
+            Short(s.speed_rpm),
+            Short(s.flow_lps),
+            Short(s.pressure_mca),
+            Short(s.speed_rad_s),
+            Short(s.pump_head_mca),
+            Short(s.pipe_loss_mca),
+            Short(s.electromagnetic_torque_pct),
+            Short(s.load_torque_pct),
             u8::from(s.extrapolation.any()),
         )
         .map_err(write_fail)?;
@@ -102,7 +91,7 @@ pub fn whitebox<T: Real + Display, W: Write + ?Sized>(
 }
 
 /// Steady states of the white-box bench for each torque.
-pub fn steady<T: Real + Display, W: Write + ?Sized>(
+pub fn steady<T: Real + Float, W: Write + ?Sized>(
     torques: &[f64],
     w: &mut W,
 ) -> Result<(), Failure> {
@@ -110,7 +99,15 @@ pub fn steady<T: Real + Display, W: Write + ?Sized>(
     writeln!(w, "torque_ref_pct,speed_rpm,flow_lps,pressure_mca").map_err(write_fail)?;
     for &u in torques {
         let s = bench.signals(&bench.steady_state(T::from_f64(u)).map_err(model_fail)?);
-        writeln!(w, "{u},{},{},{}", s.speed_rpm, s.flow_lps, s.pressure_mca).map_err(write_fail)?;
+        writeln!(
+            w,
+            "{},{},{},{}",
+            Short(u),
+            Short(s.speed_rpm),
+            Short(s.flow_lps),
+            Short(s.pressure_mca)
+        )
+        .map_err(write_fail)?;
     }
     Ok(())
 }
@@ -150,7 +147,10 @@ pub fn parse_torque_list(s: &str) -> Result<Vec<f64>, String> {
         return Err("--torque-pct: no values".into());
     }
     if let Some(bad) = values.iter().find(|u| !(0.0..=100.0).contains(*u)) {
-        return Err(format!("--torque-pct: {bad} % is outside 0..100 %"));
+        return Err(format!(
+            "--torque-pct: {} % is outside 0..100 %",
+            Short(*bad)
+        ));
     }
     Ok(values)
 }

@@ -4,9 +4,10 @@
 //! figures 4, 5, 7 and 8 as PNG files. With `--demo` it first makes all of its data with the
 //! synthetic bench (`excite` + `bench-data`), so the whole study runs without a bench.
 
-use crate::input::{read_columns, read_series, Series, TorqueInput};
+use crate::input::{read_columns, read_input_to_integrate, read_series, Series, TorqueInput};
 use crate::modelfile::{ModelFile, Target};
 use crate::narmaxcmd::{self, Identify};
+use crate::num::Short;
 use crate::train::Structure;
 use crate::{benchdata, excite, output, plots, Failure};
 use model_core::{Scheme, Signals, WhiteBox};
@@ -38,6 +39,18 @@ pub const SEED: u64 = 1;
 pub const STARTS: usize = 4;
 /// Largest RK4 step of the white-box simulation, s.
 const WHITEBOX_STEP_S: f64 = 1e-3;
+/// The model files `study` writes into `--out`.
+const MODEL_FILES: [&str; 2] = ["pressure_model.json", "flow_model.json"];
+/// Its table.
+const TABLE_FILE: &str = "table1.md";
+/// The data files `study --demo` writes into `--out`.
+const DEMO_FILES: [&str; 5] = [
+    "train_pressure.csv",
+    "val_pressure.csv",
+    "train_flow.csv",
+    "val_flow.csv",
+    "static.csv",
+];
 
 /// The data files of a study.
 #[derive(Debug, Clone)]
@@ -114,16 +127,16 @@ fn model_fail(e: model_core::BenchError) -> Failure {
 /// Steady-state points read from `path`: `(torque, pressure, flow)` rows.
 fn read_statics(path: &Path) -> Result<Vec<[f64; 3]>, Failure> {
     let cols = read_columns(path, &["torque_ref_pct", "pressure_mca", "flow_lps"])?;
-    for (row, line) in cols.rows.iter().zip(&cols.lines) {
+    for (row, line) in cols.rows().zip(&cols.lines) {
         if !(0.0..=100.0).contains(&row[0]) {
             return Err(bad(format!(
                 "{}:{line}: torque reference {} % is outside 0..100 %",
                 path.display(),
-                row[0]
+                Short(row[0])
             )));
         }
     }
-    Ok(cols.rows.iter().map(|r| [r[0], r[1], r[2]]).collect())
+    Ok(cols.rows().map(|r| [r[0], r[1], r[2]]).collect())
 }
 
 /// Reads every input before anything is computed or written: a bad file fails at once.
@@ -139,10 +152,17 @@ fn check_files(f: &Files) -> Result<(), Failure> {
             return Err(bad(format!(
                 "{}: sampled every {} s but its training record every {} s",
                 val.display(),
-                v.sample_period_s,
-                train.sample_period_s
+                Short(v.sample_period_s),
+                Short(train.sample_period_s)
             )));
         }
+        // The white-box model is simulated over it: the rule of `simulate` on its times.
+        read_input_to_integrate(
+            val,
+            WHITEBOX_STEP_S * 1e3,
+            "study simulates the white-box model over a validation record in steps of 1 ms: \
+             use a shorter record",
+        )?;
     }
     read_statics(&f.statics)?;
     Ok(())
@@ -188,6 +208,7 @@ fn demo_excite(seed: u64, seconds: f64, ts_ms: f64, min_pct: f64, max_pct: f64) 
 fn write_demo(dir: &Path) -> Result<(Files, String), Failure> {
     let mut commands = String::new();
     for (name, seed, seconds, ts_ms, bench_seed) in DEMO_RECORDS {
+        debug_assert!(DEMO_FILES.contains(&name));
         eprintln!("study: demo data {name} (excite seed {seed}, {seconds} s at {ts_ms} ms; bench-data seed {bench_seed})");
         let input = demo_excite(seed, seconds, ts_ms, 5.0, 85.0);
         output::write_csv(Some(&dir.join(name)), |w| {
@@ -223,7 +244,7 @@ fn write_demo(dir: &Path) -> Result<(Files, String), Failure> {
         }
         rows.push((torque, p / n, q / n));
     }
-    output::write_csv(Some(&dir.join("static.csv")), |w| {
+    output::write_csv(Some(&dir.join(DEMO_FILES[4])), |w| {
         let io = |e: std::io::Error| other(format!("cannot write the output: {e}"));
         writeln!(w, "torque_ref_pct,pressure_mca,flow_lps").map_err(io)?;
         for (u, p, q) in &rows {
@@ -242,11 +263,11 @@ fn write_demo(dir: &Path) -> Result<(Files, String), Failure> {
         DEMO_STATIC_SECONDS - DEMO_STATIC_TAIL_S
     );
     let files = Files {
-        train_pressure: dir.join("train_pressure.csv"),
-        train_flow: dir.join("train_flow.csv"),
-        val_pressure: dir.join("val_pressure.csv"),
-        val_flow: dir.join("val_flow.csv"),
-        statics: dir.join("static.csv"),
+        train_pressure: dir.join(DEMO_FILES[0]),
+        val_pressure: dir.join(DEMO_FILES[1]),
+        train_flow: dir.join(DEMO_FILES[2]),
+        val_flow: dir.join(DEMO_FILES[3]),
+        statics: dir.join(DEMO_FILES[4]),
     };
     Ok((files, commands))
 }
@@ -393,8 +414,8 @@ fn identify(
         starts: STARTS,
     })?;
     let name = match target {
-        Target::Pressure => "pressure_model.json",
-        Target::Flow => "flow_model.json",
+        Target::Pressure => MODEL_FILES[0],
+        Target::Flow => MODEL_FILES[1],
     };
     narmaxcmd::write_model(&out.join(name), &model)?;
     Ok(model)
@@ -444,13 +465,14 @@ pub fn table1(p: &TargetResult, q: &TargetResult, lowest_pct: f64, data: &str) -
     let _ = write!(
         s,
         "\nStatic: MAPE_s over {} steady-state points; pressure static is \"all points / without \
-         the lowest-torque point ({lowest_pct} %)\". Dynamic: MAPE_d of the free run over the \
+         the lowest-torque point ({} %)\". Dynamic: MAPE_d of the free run over the \
          validation record, the first {} (pressure) and {} (flow) rows left out (they seed the \
          NARMAX models); the white-box model is simulated from the steady state of the first \
          row's torque (RK4, steps <= 1 ms). NARMAX models: pressure na={} nb={} nc={} nk={} with \
          {} hidden units, flow na={} nb={} nc={} nk={} with {} hidden units ({EPOCHS} LM epochs, \
          seed {SEED}, {STARTS} starts), f64.\n\n",
         p.statics.len(),
+        Short(lowest_pct),
         p.skip,
         q.skip,
         PRESSURE_STRUCTURE.na,
@@ -478,6 +500,24 @@ pub fn table1(p: &TargetResult, q: &TargetResult, lowest_pct: f64, data: &str) -
 pub fn run(o: &Study) -> Result<(), Failure> {
     let start = Instant::now();
     let out = &o.out;
+    // Every output checked before any input is read: none is an input, all can be written.
+    let mut names: Vec<&str> = MODEL_FILES.to_vec();
+    names.push(TABLE_FILE);
+    names.extend(plots::FIGURES);
+    let inputs: Vec<output::Named> = match &o.files {
+        Some(f) => vec![
+            ("--train-pressure", f.train_pressure.as_path()),
+            ("--train-flow", f.train_flow.as_path()),
+            ("--val-pressure", f.val_pressure.as_path()),
+            ("--val-flow", f.val_flow.as_path()),
+            ("--static", f.statics.as_path()),
+        ],
+        None => {
+            names.extend(DEMO_FILES);
+            Vec::new()
+        }
+    };
+    output::check_outputs_in_folder(&inputs, "--out", out, &names)?;
     let (files, data) = match &o.files {
         Some(f) => {
             check_files(f)?;
@@ -523,7 +563,7 @@ pub fn run(o: &Study) -> Result<(), Failure> {
     let p = evaluate(&pm, &files.val_pressure, &statics)?;
     let q = evaluate(&fm, &files.val_flow, &statics)?;
     let table = table1(&p, &q, lowest_pct, &data);
-    output::write_csv(Some(&out.join("table1.md")), |w| {
+    output::write_csv(Some(&out.join(TABLE_FILE)), |w| {
         w.write_all(table.as_bytes())
             .map_err(|e| other(format!("cannot write table1.md: {e}")))
     })?;

@@ -184,7 +184,8 @@ fn study_errors() {
     );
     assert!(!result.exists());
 
-    // An output folder that cannot be created: exit 1, one line.
+    // An output folder that cannot be created: refused before anything is read or computed,
+    // as every output that cannot be written is: exit 2, one line.
     let file = d.join("a_file");
     std::fs::write(&file, "").unwrap();
     let out = pumpbench(&[
@@ -194,7 +195,7 @@ fn study_errors() {
         &file.join("sub").display().to_string(),
     ]);
     let stderr = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
     assert_eq!(stderr.lines().count(), 1, "{stderr}");
     assert!(stderr.contains("cannot create the folder"), "{stderr}");
 }
