@@ -94,6 +94,12 @@ pub trait Uart {
     fn tx_complete(&mut self) -> bool;
     /// Drives the RS-485 transceiver (`true` while sending); nothing for a plain UART.
     fn set_driver(&mut self, _on: bool) {}
+    /// `true` if the port hears its own transmission (a half-duplex RS-485 transceiver with
+    /// its receiver on): bytes received while sending are then dropped as the echo. `false`
+    /// for a full-duplex port (QEMU's), where they are the peer's next request.
+    fn echoes(&self) -> bool {
+        true
+    }
 }
 
 /// A half-duplex RTU port: frames in by silence ([`RtuFramer`]), one frame out at a time,
@@ -150,8 +156,9 @@ impl<U: Uart> RtuPort<U> {
     /// Moves bytes: received ones into the framer (stamped `now_ms`), queued ones out; drops
     /// the driver once the last byte is out.
     pub fn poll(&mut self, now_ms: u32) {
+        let echo = self.sending && self.uart.echoes();
         while let Some(b) = self.uart.try_read() {
-            if !self.sending {
+            if !echo {
                 self.framer.push(b, now_ms);
             }
         }
@@ -183,15 +190,16 @@ impl<U: Uart> RtuPort<U> {
         out: &mut Frame,
         find: impl Fn(&[u8]) -> Option<usize>,
     ) -> bool {
-        while !self.sending {
+        while !self.sending || !self.uart.echoes() {
             let Some(b) = self.uart.try_read() else { break };
             self.framer.push(b, now_ms);
             if self.framer.take_if(out, &find) {
                 return true;
             }
         }
+        // Bytes [`Self::poll`] took since the last call have not been looked at yet.
         self.poll(now_ms);
-        self.framer.poll(now_ms, out)
+        self.framer.take_if(out, &find) || self.framer.poll(now_ms, out)
     }
 }
 
@@ -248,6 +256,36 @@ mod tests {
         assert!(!p.receive(t + 6, &mut out));
         assert!(p.receive(t + 8, &mut out));
         assert_eq!(&out[..], &[4, 5]);
+    }
+
+    /// A full-duplex port (no echo) keeps what arrives while it sends: the peer's next request.
+    #[test]
+    fn a_port_without_echo_keeps_bytes_received_while_sending() {
+        struct Duplex(Loopback);
+        impl Uart for Duplex {
+            fn try_read(&mut self) -> Option<u8> {
+                self.0.rx.pop_front()
+            }
+            fn try_write(&mut self, b: u8) -> bool {
+                self.0.wire.push(b);
+                true
+            }
+            fn tx_complete(&mut self) -> bool {
+                false
+            }
+            fn echoes(&self) -> bool {
+                false
+            }
+        }
+        let mut p = RtuPort::new(Duplex(Loopback::default()), 2);
+        let mut out = Frame::new();
+        assert!(p.send(&[1, 2, 3]));
+        p.uart().0.rx.extend([7, 8, 9]);
+        p.poll(0);
+        assert!(p.sending(), "still sending");
+        let whole = |b: &[u8]| b.ends_with(&[7, 8, 9]).then(|| b.len() - 3);
+        assert!(p.receive_complete(0, &mut out, whole));
+        assert_eq!(&out[..], &[7, 8, 9]);
     }
 
     #[test]

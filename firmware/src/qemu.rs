@@ -164,6 +164,10 @@ impl Uart for Usart {
     fn tx_complete(&mut self) -> bool {
         self.regs.sr().read().tc().bit_is_set()
     }
+    /// QEMU's serial back-ends are full duplex: no echo, so back-to-back requests are kept.
+    fn echoes(&self) -> bool {
+        false
+    }
 }
 
 /// Milliseconds from TIM2 running free at 1 MHz (32 bits: wraps every 71 min, taken care of

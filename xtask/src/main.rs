@@ -775,6 +775,19 @@ mod line {
                 "only {answered} of 100 back-to-back writes answered"
             ));
         }
+        // Two requests in one write (no gap at all): both answered, in order.
+        let (a, b) = (frame(&[1, 4, 0, 17, 0, 1]), frame(&[1, 3, 0, 0, 0, 3]));
+        port.send(&[a, b].concat())?;
+        let both = port.recv(7 + 11, Duration::from_secs(1));
+        let ok = both.len() == 18
+            && both[..3] == [1, 4, 2]
+            && crc16(&both[..5]).to_le_bytes() == both[5..7]
+            && both[7..10] == [1, 3, 6]
+            && crc16(&both[7..16]).to_le_bytes() == both[16..18];
+        if !ok {
+            return Err(format!("two requests in one write: got {both:02x?}"));
+        }
+        report.push_str("two requests in one write: both answered, in order\n");
         drop(port);
         // 4. A client that sends and never reads (answers pile up: 25 KB in 12 s) does not
         //    stop the controller.
