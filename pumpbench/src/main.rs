@@ -341,6 +341,11 @@ macro_rules! with_narmax {
     };
 }
 
+/// The `--weights` file, if given, as the inputs an output must not be.
+fn weights_input(weights: Option<&std::path::Path>) -> Vec<output::Named<'_>> {
+    weights.map(|w| ("--weights", w)).into_iter().collect()
+}
+
 /// [`output::check_outputs`] for an optional `--output` (stdout if `None`: nothing to check).
 fn check_optional_output(inputs: &[output::Named], out: Option<&Path>) -> Result<(), Failure> {
     match out {
@@ -576,11 +581,7 @@ fn run(cli: Cli) -> Result<(), Failure> {
             output,
             weights,
         } => {
-            let inputs: Vec<output::Named> = weights
-                .as_deref()
-                .map(|w| ("--weights", w))
-                .into_iter()
-                .collect();
+            let inputs = weights_input(weights.as_deref());
             check_optional_output(&inputs, output.as_deref())?;
             let torques = simulate::parse_torque_list(&torque_pct).map_err(Failure::usage)?;
             output::write_csv(output.as_deref(), |w| match precision {
@@ -598,11 +599,7 @@ fn run(cli: Cli) -> Result<(), Failure> {
             torque_pct,
             output,
         } => {
-            let inputs: Vec<output::Named> = weights
-                .as_deref()
-                .map(|w| ("--weights", w))
-                .into_iter()
-                .collect();
+            let inputs = weights_input(weights.as_deref());
             check_optional_output(&inputs, output.as_deref())?;
             let m = need_weights(weights)?;
             let torques = simulate::parse_torque_list(&torque_pct).map_err(Failure::usage)?;

@@ -71,6 +71,15 @@ fn files_in(dir: &Path) -> Vec<String> {
 
 /// Item 8: an output that resolves to an input (same path written differently, a symlink, a
 /// hard link) is refused before anything is read or written; the input is left as it was.
+/// The arguments of a tiny `identify` run (one hidden unit, two epochs) of the pressure column
+/// of `data` into `output`.
+fn identify_args<'a>(data: &'a str, output: &'a str) -> [&'a str; 17] {
+    [
+        "identify", "--data", data, "--target", "pressure", "--na", "1", "--nb", "1", "--hidden",
+        "1", "--epochs", "2", "--starts", "1", "--output", output,
+    ]
+}
+
 #[test]
 fn an_output_that_is_an_input_is_refused_and_the_input_kept() {
     let dir = tempfile::tempdir().unwrap();
@@ -83,28 +92,10 @@ fn an_output_that_is_an_input_is_refused_and_the_input_kept() {
     std::fs::create_dir(d.join("out")).unwrap();
     let table = write(&d.join("out"), "table1.md", &record(300));
     let identify = |output: &str| -> Vec<String> {
-        [
-            "identify",
-            "--data",
-            "train.csv",
-            "--target",
-            "pressure",
-            "--na",
-            "1",
-            "--nb",
-            "1",
-            "--hidden",
-            "1",
-            "--epochs",
-            "2",
-            "--starts",
-            "1",
-            "--output",
-            output,
-        ]
-        .iter()
-        .map(|s| s.to_string())
-        .collect()
+        identify_args("train.csv", output)
+            .iter()
+            .map(|s| s.to_string())
+            .collect()
     };
     let cases: Vec<(Vec<String>, &str)> = vec![
         (identify("./train.csv"), &train),
@@ -496,25 +487,7 @@ fn identify_names_an_overflowing_or_out_of_range_target() {
         }
         let data = write(d, name, &text);
         let model = d.join(format!("{name}.json"));
-        let out = pumpbench(&[
-            "identify",
-            "--data",
-            &data,
-            "--target",
-            "pressure",
-            "--na",
-            "1",
-            "--nb",
-            "1",
-            "--hidden",
-            "1",
-            "--epochs",
-            "2",
-            "--starts",
-            "1",
-            "--output",
-            model.to_str().unwrap(),
-        ]);
+        let out = pumpbench(&identify_args(&data, model.to_str().unwrap()));
         let err = refused(&out, &[&data, "pressure_mca", expected], name);
         assert!(!err.contains("constant"), "{err}");
         assert!(!model.exists(), "{name}: no model file");
