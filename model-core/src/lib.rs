@@ -53,6 +53,7 @@ pub mod error;
 pub mod excitation;
 pub mod flow;
 pub mod narmax;
+pub mod observer;
 pub mod params;
 pub mod scalar;
 pub mod whitebox;

@@ -44,6 +44,8 @@ pub trait Real:
     fn min(self, other: Self) -> Self;
     /// Hyperbolic tangent (`libm`).
     fn tanh(self) -> Self;
+    /// Exponential (`libm`).
+    fn exp(self) -> Self;
 }
 
 impl Real for f32 {
@@ -82,6 +84,10 @@ impl Real for f32 {
     fn tanh(self) -> Self {
         libm::tanhf(self)
     }
+    #[inline]
+    fn exp(self) -> Self {
+        libm::expf(self)
+    }
 }
 
 impl Real for f64 {
@@ -119,5 +125,9 @@ impl Real for f64 {
     #[inline]
     fn tanh(self) -> Self {
         libm::tanh(self)
+    }
+    #[inline]
+    fn exp(self) -> Self {
+        libm::exp(self)
     }
 }
