@@ -52,6 +52,7 @@ pub mod equations;
 pub mod error;
 pub mod excitation;
 pub mod flow;
+pub mod monitor;
 pub mod narmax;
 pub mod observer;
 pub mod params;

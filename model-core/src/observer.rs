@@ -893,7 +893,7 @@ fn estimate_finite<T: Real>(e: &Estimate<T>) -> bool {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::excitation::{PulseTrain, SplitMix64, SteppedPulses};
 
@@ -929,6 +929,20 @@ mod tests {
     /// `steps` (time s, × nominal k2), transmitter lags (20 / 40 ms) and noise (3 mm, 0.02
     /// l/s, 0.5 rpm).
     pub(crate) fn record(seed: u64, seconds: f64, e: f64, steps: &[(f64, f64)]) -> Vec<Row> {
+        record_with(seed, seconds, e, steps, None, 1.0)
+    }
+
+    /// As [`record`], and from `dry_from_s` on the pump runs dry: no flow, the outlet at its
+    /// static level (−c), the load torque only the friction part of the curve (β9 ω + β10);
+    /// with each valve step the pipe's k1 becomes `k1_factor` × the paper's (a broken pipe).
+    pub(crate) fn record_with(
+        seed: u64,
+        seconds: f64,
+        e: f64,
+        steps: &[(f64, f64)],
+        dry_from_s: Option<f64>,
+        k1_factor: f64,
+    ) -> Vec<Row> {
         let mut par = BenchParams::<f64>::paper();
         for a in par.alpha.iter_mut() {
             *a *= 1.0 + e;
@@ -954,12 +968,31 @@ mod tests {
             for &(ts, f) in steps {
                 if (now - ts).abs() < 0.5e-3 {
                     k2 = k2_nom * f;
+                    if k1_factor != 1.0 {
+                        let mut q = *bench.params();
+                        q.pipe_k1 = par.pipe_k1 * k1_factor;
+                        bench = WhiteBox::new(q).unwrap();
+                    }
                     bench.set_load(k2, par.static_head_c_mca).unwrap();
                 }
             }
             acc += u;
-            bench.step(&mut state, u, 1e-3, Scheme::Rk4).unwrap();
-            let s = bench.signals(&state);
+            let mut s = if dry_from_s.is_some_and(|t| now >= t) {
+                let p = bench.params();
+                let te = crate::equations::electromagnetic_torque_pct(&p.gamma, u);
+                let w = state.speed_rpm;
+                let friction = p.beta[8] * w + p.beta[9];
+                let k = p.nominal_torque_nm / 100.0 / p.inertia_kg_m2 * RPM_PER_RAD_S;
+                state.speed_rpm = (w + 1e-3 * k * (te - friction)).max(0.0);
+                let mut s = bench.signals(&state);
+                s.flow_lps = 0.0;
+                s.pressure_mca = -p.static_head_c_mca;
+                s
+            } else {
+                bench.step(&mut state, u, 1e-3, Scheme::Rk4).unwrap();
+                bench.signals(&state)
+            };
+            s.speed_rpm = state.speed_rpm;
             t.lag_p += (1.0 - (-1e-3f64 / 0.020).exp()) * (s.pressure_mca - t.lag_p);
             t.lag_q += (1.0 - (-1e-3f64 / 0.040).exp()) * (s.flow_lps - t.lag_q);
             if (ms + 1) % 50 == 0 {
