@@ -14,8 +14,12 @@
 //!    the measurement, or free run on its own predictions while the transmitter is in fault
 //!    (NAMUR NE 43, flagged on the sample that shows it); residuals (measured − predicted) for
 //!    the white-box and NARMAX models;
-//! 5. the white-box bench (f32, RK4) one 1 ms step with the applied reference;
-//! 6. once a second, a [`LogLine`].
+//! 5. with each pressure sample (50 ms), the observer ([`model_core::observer`], f32) steps
+//!    with the mean applied torque since the last one and takes the pressure, the flow (when
+//!    it was sampled) and the VFD's speed (when a read brought a fresh one), each unless in
+//!    fault; the alarms ([`model_core::monitor`]) follow;
+//! 6. the white-box bench (f32, RK4) one 1 ms step with the applied reference;
+//! 7. once a second, a [`LogLine`].
 //!
 //! Nothing here touches hardware, so the whole loop runs in host tests against fakes.
 
@@ -23,8 +27,10 @@ use crate::analog::{AnalogInput, LoopConfig, Status as InputStatus};
 use crate::scada::{Arithmetic, Mode, Published, Response, ScadaSlave, Status};
 use crate::vfd::{Frame, VfdMap, VfdMaster};
 use model_core::excitation::{PulseTrain, SteppedPulses};
+use model_core::monitor::{Monitor, MonitorConfig, MonitorInputs};
 use model_core::narmax::fixed::{NarmaxQ, NarmaxQState};
 use model_core::narmax::{Narmax, NarmaxError, NarmaxOutput, NarmaxState};
+use model_core::observer::{Measurements, Observer, ObserverConfig, ObserverError};
 use model_core::{BenchError, BenchState, Scheme, Signals, WhiteBox};
 
 /// Loop period, ms: one [`App::tick`].
@@ -44,6 +50,10 @@ pub trait Io {
     fn vfd_send(&mut self, frame: &[u8]);
     /// Moves a complete RTU frame received from the VFD into `frame`; `false` if none.
     fn vfd_receive(&mut self, now_ms: u32, frame: &mut Frame) -> bool;
+    /// A virtual bench's valve (0.1 % of nominal k2) and injected faults
+    /// (`scada::FAULT_*`), from SCADA holding registers 3 and 4, every tick; a board with a
+    /// real bench has none and ignores them.
+    fn virtual_bench(&mut self, _valve_permille: u16, _faults: u16) {}
 }
 
 /// Configuration of the loop.
@@ -65,11 +75,15 @@ pub struct AppConfig {
     pub initial_setpoint: u16,
     /// NARMAX arithmetic at start-up.
     pub initial_arithmetic: Arithmetic,
+    /// The board has a virtual bench: SCADA holding registers 3 (valve) and 4 (fault
+    /// injection) exist and are handed to [`Io::virtual_bench`] every tick.
+    pub virtual_bench: bool,
 }
 
 impl AppConfig {
     /// Pressure 0..10 mca and flow 0..30 l/s on [`LoopConfig::typical`] loops, the
-    /// [`VfdMap::example_16384`] drive, SCADA unit 1, profile seed 1, stopped, NARMAX in f32.
+    /// [`VfdMap::example_16384`] drive, SCADA unit 1, profile seed 1, stopped, NARMAX in f32,
+    /// no virtual bench.
     pub const fn bench() -> Self {
         Self {
             pressure_loop: LoopConfig::typical(0.0, 10.0),
@@ -80,6 +94,7 @@ impl AppConfig {
             initial_mode: Mode::Stop,
             initial_setpoint: 0,
             initial_arithmetic: Arithmetic::F32,
+            virtual_bench: false,
         }
     }
 }
@@ -93,6 +108,8 @@ pub enum AppError {
     Bench(BenchError),
     /// A NARMAX model could not be quantised.
     Narmax(NarmaxError),
+    /// The observer refused its configuration.
+    Observer(ObserverError),
 }
 
 impl core::fmt::Display for AppError {
@@ -101,6 +118,7 @@ impl core::fmt::Display for AppError {
             AppError::Config(what) => write!(f, "bad configuration: {what}"),
             AppError::Bench(e) => write!(f, "white-box bench: {e}"),
             AppError::Narmax(e) => write!(f, "NARMAX model: {e}"),
+            AppError::Observer(e) => write!(f, "{e}"),
         }
     }
 }
@@ -227,6 +245,13 @@ impl LogLine {
         }
         write!(out, " vfd_rpm=")?;
         write_fixed(out, v.vfd_speed_rpm, 1)?;
+        out.write_str(" ob_rpm=")?;
+        write_fixed(out, v.observer_speed_rpm, 1)?;
+        out.write_str(" ob_q=")?;
+        write_fixed(out, v.observer_flow_lps, 2)?;
+        out.write_str(" ob_k2=")?;
+        write_fixed(out, v.observer_valve_k2, 5)?;
+        write!(out, " alarms={:#04x}", v.alarms)?;
         write!(
             out,
             " status={:#04x} bits={:08x},{:08x},{:08x},{:08x},{:08x}",
@@ -258,6 +283,14 @@ pub struct App<const NP: usize, const HP: usize, const NF: usize, const HF: usiz
     model_fault: bool,
     wb_extrapolating: bool,
     nx_clamped: [bool; 2],
+    observer: Observer<f32>,
+    monitor: Monitor<f32>,
+    /// Applied torque summed since the last observer step, % · ticks, and the ticks.
+    torque_sum: f32,
+    torque_ticks: u32,
+    /// [`VfdMaster::reads_ok`] at the last observer step.
+    vfd_reads_seen: u32,
+    virtual_bench: bool,
     out: Published,
     tx: Frame,
     rx: Frame,
@@ -281,6 +314,10 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize> App<NP,
         scada.mode = config.initial_mode;
         scada.setpoint = config.initial_setpoint;
         scada.arithmetic = config.initial_arithmetic;
+        if config.virtual_bench {
+            scada = scada.with_virtual_bench();
+        }
+        let observer = Observer::new(ObserverConfig::paper(), 0.0).map_err(AppError::Observer)?;
         let whitebox = WhiteBox::<f32>::paper();
         let wb = whitebox.steady_state(0.0).map_err(AppError::Bench)?;
         let mut app = Self {
@@ -299,6 +336,12 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize> App<NP,
             model_fault: false,
             wb_extrapolating: false,
             nx_clamped: [false; 2],
+            observer,
+            monitor: Monitor::new(MonitorConfig::paper()),
+            torque_sum: 0.0,
+            torque_ticks: 0,
+            vfd_reads_seen: 0,
+            virtual_bench: config.virtual_bench,
             out: Published::default(),
             tx: Frame::new(),
             rx: Frame::new(),
@@ -360,6 +403,58 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize> App<NP,
         }
     }
 
+    /// One observer step over the pressure period, then the alarms.
+    fn observe(&mut self, pressure: Option<f32>, flow: Option<f32>) {
+        let dt = self.pressure.period_ms as f32 * 1e-3;
+        let torque = if self.torque_ticks > 0 {
+            self.torque_sum / self.torque_ticks as f32
+        } else {
+            0.0
+        };
+        (self.torque_sum, self.torque_ticks) = (0.0, 0);
+        let fresh = self.vfd.reads_ok() != self.vfd_reads_seen;
+        self.vfd_reads_seen = self.vfd.reads_ok();
+        let drive = self.vfd.readings().filter(|_| fresh);
+        let m = Measurements {
+            pressure_mca: pressure,
+            flow_lps: flow,
+            speed_rpm: drive.map(|r| r.speed_rpm),
+        };
+        // dt is the pressure period (≥ 1 ms, ≤ 10 s for any sane model): a refused step keeps
+        // the last estimate.
+        let e = self
+            .observer
+            .step(dt, torque, &m)
+            .unwrap_or_else(|_| self.observer.estimate_now());
+        let alarms = self.monitor.update(&MonitorInputs {
+            dt_s: dt,
+            estimate: e,
+            torque_ref_pct: torque,
+            vfd_torque_pct: drive.map(|r| r.torque_pct),
+            vfd_speed_rpm: drive.map(|r| r.speed_rpm),
+            measured_flow_lps: flow,
+            pressure_fault: self.pressure_in.faulted(),
+            flow_fault: self.flow_in.faulted(),
+            vfd_link_alarm: self.vfd.alarm(),
+        });
+        let o = &mut self.out;
+        o.observer_speed_rpm = e.speed_rpm;
+        o.observer_flow_lps = e.flow_lps;
+        o.observer_valve_k2 = e.valve_k2;
+        o.observer_flow_sd_lps = e.flow_sd_lps;
+        o.alarms = alarms;
+    }
+
+    /// The observer (its state, covariance and last estimate).
+    pub fn observer(&self) -> &Observer<f32> {
+        &self.observer
+    }
+
+    /// The alarms.
+    pub fn monitor(&self) -> &Monitor<f32> {
+        &self.monitor
+    }
+
     /// One millisecond of the loop (see the module docs); a log line once a second.
     pub fn tick(&mut self, io: &mut impl Io) -> Option<LogLine> {
         let now = self.t_ms;
@@ -376,6 +471,11 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize> App<NP,
         }
         let u = self.vfd.applied_torque_pct(requested);
         io.set_torque_ref(u);
+        if self.virtual_bench {
+            io.virtual_bench(self.scada.valve_permille, self.scada.faults);
+        }
+        self.torque_sum += u;
+        self.torque_ticks += 1;
 
         if self.scada.arithmetic != self.arithmetic {
             // The other arithmetic's history is stale: start it at the last predictions.
@@ -394,9 +494,11 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize> App<NP,
             o.whitebox_speed_rpm = wb.speed_rpm;
             o.whitebox_pressure_mca = wb.pressure_mca;
             o.whitebox_flow_lps = wb.flow_lps;
+            let mut pressure_measured = None;
             if take_p {
                 let r = self.pressure_in.sample(io.pressure_code());
                 let good = r.status != InputStatus::Fault;
+                pressure_measured = good.then_some(r.value);
                 let nx = self
                     .pressure
                     .step(self.arithmetic, u, good.then_some(r.value));
@@ -413,9 +515,11 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize> App<NP,
                 };
                 o.sample = o.sample.wrapping_add(1);
             }
+            let mut flow_measured = None;
             if take_q {
                 let r = self.flow_in.sample(io.flow_code());
                 let good = r.status != InputStatus::Fault;
+                flow_measured = good.then_some(r.value);
                 let nx = self.flow.step(self.arithmetic, u, good.then_some(r.value));
                 self.nx_clamped[1] = nx.clamped;
                 o.flow_lps = r.value;
@@ -425,6 +529,9 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize> App<NP,
                 } else {
                     (0.0, 0.0)
                 };
+            }
+            if take_p {
+                self.observe(pressure_measured, flow_measured);
             }
         }
 
@@ -444,7 +551,12 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize> App<NP,
         let o = &mut self.out;
         o.status = Status {
             running: self.scada.mode != Mode::Stop,
-            any_alarm: !link_ok || blind || p_fault || q_fault || self.model_fault,
+            any_alarm: !link_ok
+                || blind
+                || p_fault
+                || q_fault
+                || self.model_fault
+                || o.alarms & !model_core::monitor::LOAD_CHANGED != 0,
             extrapolating: self.wb_extrapolating || self.nx_clamped.iter().any(|&c| c),
             vfd_link_ok: link_ok,
             pressure_fault: p_fault,

@@ -76,6 +76,9 @@ pub struct VirtualBench {
     pub force_pressure_ma: Option<f32>,
     /// A forced flow loop current, mA, or `None`.
     pub force_flow_ma: Option<f32>,
+    /// The pump runs dry (loss of prime): no flow, the outlet at its static level (−c), and
+    /// only the friction part of the load curve (β9 ω + β10) left on the shaft.
+    pub dry_run: bool,
 }
 
 impl VirtualBench {
@@ -104,7 +107,21 @@ impl VirtualBench {
             rng: SplitMix64::new(config.seed),
             force_pressure_ma: None,
             force_flow_ma: None,
+            dry_run: false,
         })
+    }
+
+    /// Sets the valve to `factor` × its configured k2 (the bench's own, a few percent off the
+    /// model's); `factor` finite and > 0.
+    pub fn set_valve_factor(&mut self, factor: f32) -> Result<(), BenchError> {
+        let k2 = BenchParams::<f32>::paper().valve_k2 * self.config.valve_factor * factor;
+        let c = self.bench.params().static_head_c_mca;
+        self.bench.set_load(k2, c)
+    }
+
+    /// The valve coefficient now.
+    pub fn valve_k2(&self) -> f32 {
+        self.bench.params().valve_k2
     }
 
     /// Advances the bench by 1 ms with `torque_pct` (clamped to 0..=100 %, NaN as 0).
@@ -114,7 +131,19 @@ impl VirtualBench {
         } else {
             torque_pct.clamp(0.0, 100.0)
         };
-        self.bench.step(&mut self.state, u, 1e-3, Scheme::Rk4)?;
+        if self.dry_run {
+            // Friction only, no water: Euler at 1 ms is ample for this first-order run-up.
+            let p = self.bench.params();
+            let te = model_core::equations::electromagnetic_torque_pct(&p.gamma, u);
+            let w = self.state.speed_rpm;
+            let friction = p.beta[8] * w + p.beta[9];
+            let accel = p.nominal_torque_nm / 100.0 / p.inertia_kg_m2
+                * model_core::params::RPM_PER_RAD_S as f32;
+            self.state.speed_rpm = (w + 1e-3 * accel * (te - friction)).clamp(0.0, 6000.0);
+            self.state.flow_lps = 0.0;
+        } else {
+            self.bench.step(&mut self.state, u, 1e-3, Scheme::Rk4)?;
+        }
         // First-order transmitter lags (exact discretisation at 1 ms needs exp; the forward
         // form is within 0.1 % of it for lags ≥ 20 ms).
         let lag = |tau: f32| if tau > 1e-3 { 1e-3 / tau } else { 1.0 };
@@ -182,6 +211,8 @@ pub struct VirtualIo {
     /// `false` cuts the VFD link (the drive gets nothing, answers nothing).
     pub link_up: bool,
     torque_pct: f32,
+    valve_permille: u16,
+    faults: u16,
     answer: Frame,
 }
 
@@ -193,6 +224,8 @@ impl VirtualIo {
             drive: VfdSim::new(map)?,
             link_up: true,
             torque_pct: 0.0,
+            valve_permille: crate::scada::VALVE_NOMINAL_PERMILLE,
+            faults: 0,
             answer: Frame::new(),
         })
     }
@@ -216,6 +249,29 @@ impl VirtualIo {
     }
 }
 
+impl VirtualIo {
+    /// Applies the SCADA's virtual-bench registers when they change: the valve in 0.1 % of
+    /// nominal (clamped to 500..=2000) and the fault bits (`crate::scada::FAULT_*`). Unchanged
+    /// registers leave the bench alone (tests set its faults directly).
+    pub fn apply(&mut self, valve_permille: u16, faults: u16) {
+        use crate::scada::{FAULT_DRY_RUN, FAULT_FLOW_2MA, FAULT_PRESSURE_2MA, FAULT_VFD_LINK};
+        let permille = valve_permille.clamp(500, 2000);
+        if permille != self.valve_permille {
+            self.valve_permille = permille;
+            // Within 0.5..2 × a valid k2: cannot fail.
+            let _ = self.bench.set_valve_factor(f32::from(permille) * 1e-3);
+        }
+        if faults == self.faults {
+            return;
+        }
+        self.faults = faults;
+        self.bench.dry_run = faults & FAULT_DRY_RUN != 0;
+        self.bench.force_pressure_ma = (faults & FAULT_PRESSURE_2MA != 0).then_some(2.0);
+        self.bench.force_flow_ma = (faults & FAULT_FLOW_2MA != 0).then_some(2.0);
+        self.link_up = faults & FAULT_VFD_LINK == 0;
+    }
+}
+
 impl Io for VirtualIo {
     fn pressure_code(&mut self) -> u16 {
         self.bench.pressure_code()
@@ -236,6 +292,9 @@ impl Io for VirtualIo {
             let values = self.drive_values();
             self.drive.handle(frame, &values, &mut self.answer);
         }
+    }
+    fn virtual_bench(&mut self, valve_permille: u16, faults: u16) {
+        self.apply(valve_permille, faults);
     }
     fn vfd_receive(&mut self, _now_ms: u32, frame: &mut Frame) -> bool {
         if self.answer.is_empty() {

@@ -20,12 +20,22 @@
 //! | 15 | VFD actual torque (0 while bit 6 is set) | 0.01 %, signed |
 //! | 16 | VFD status word, the vendor's bits (0 while bit 6 is set) | |
 //! | 17 | uptime (wraps) | s |
+//! | 18 | observer speed | 0.1 rpm |
+//! | 19 | observer flow | 0.01 l/s |
+//! | 20 | observer valve coefficient k2 (0.1082 → 10820) | 1e-5 |
+//! | 21 | alarm bits ([`model_core::monitor`]): 0 pressure transmitter, 1 flow transmitter, 2 VFD link, 3 dry run, 4 no flow, 5 end of curve, 6 load changed, 7 model residual | |
+//! | 22 | observer flow standard deviation | 0.01 l/s |
 //!
 //! | holding register (FC 03, 06, 16) | meaning | range |
 //! |---|---|---|
 //! | 0 | torque setpoint, 0.01 % | 0..=10000 |
 //! | 1 | mode: 0 stop, 1 manual setpoint, 2 built-in excitation profile | 0..=2 |
 //! | 2 | NARMAX arithmetic: 0 f32, 1 fixed point | 0..=1 |
+//! | 3 | virtual bench only: its valve, k2 in 0.1 % of nominal (1000 = nominal) | 500..=2000 |
+//! | 4 | virtual bench only: fault injection bits: 0 dry run, 1 pressure transmitter at 2 mA, 2 flow transmitter at 2 mA, 3 VFD link cut | 0..=15 |
+//!
+//! Holding registers 3 and 4 exist only with a virtual bench ([`ScadaSlave::with_virtual_bench`]):
+//! on a board without one they answer exception 02 like any address outside the map.
 //!
 //! Exceptions as the Modbus spec says: 01 illegal function (anything but 03, 04, 06, 16, whatever
 //! its fields),
@@ -43,9 +53,23 @@ use rmodbus::server::{ModbusFrame, Read, Write};
 use rmodbus::{ErrorKind, ModbusProto};
 
 /// Input registers.
-pub const INPUT_REGISTERS: usize = 18;
-/// Holding registers.
-pub const HOLDING_REGISTERS: usize = 3;
+pub const INPUT_REGISTERS: usize = 23;
+/// Holding registers with a virtual bench (3 without).
+pub const HOLDING_REGISTERS: usize = 5;
+/// Holding registers on a board without a virtual bench.
+pub const BOARD_HOLDING_REGISTERS: usize = 3;
+/// Virtual bench valve, 0.1 % of nominal k2: nominal.
+pub const VALVE_NOMINAL_PERMILLE: u16 = 1000;
+/// Virtual bench valve: the range, 0.1 % of nominal k2.
+pub const VALVE_RANGE_PERMILLE: core::ops::RangeInclusive<u16> = 500..=2000;
+/// Fault injection bit: the virtual pump runs dry.
+pub const FAULT_DRY_RUN: u16 = 1 << 0;
+/// Fault injection bit: the pressure transmitter at 2 mA.
+pub const FAULT_PRESSURE_2MA: u16 = 1 << 1;
+/// Fault injection bit: the flow transmitter at 2 mA.
+pub const FAULT_FLOW_2MA: u16 = 1 << 2;
+/// Fault injection bit: the virtual VFD link cut.
+pub const FAULT_VFD_LINK: u16 = 1 << 3;
 /// Largest torque setpoint, 0.01 %.
 pub const SETPOINT_MAX: u16 = 10_000;
 /// Longest RTU frame (Modbus: 256 bytes).
@@ -191,6 +215,16 @@ pub struct Published {
     pub vfd_status: u16,
     /// Uptime, s.
     pub uptime_s: u16,
+    /// Observer speed, rpm.
+    pub observer_speed_rpm: f32,
+    /// Observer flow, l/s.
+    pub observer_flow_lps: f32,
+    /// Observer valve coefficient k2.
+    pub observer_valve_k2: f32,
+    /// Alarm bits (see the module table).
+    pub alarms: u16,
+    /// Observer flow standard deviation, l/s.
+    pub observer_flow_sd_lps: f32,
 }
 
 /// `x · scale` rounded and clamped to 0..=u16::MAX; NaN gives 0.
@@ -237,6 +271,11 @@ impl Published {
             signed_register(self.vfd_torque_pct, 100.0),
             self.vfd_status,
             self.uptime_s,
+            unsigned_register(self.observer_speed_rpm, 10.0),
+            unsigned_register(self.observer_flow_lps, 100.0),
+            unsigned_register(self.observer_valve_k2, 1e5),
+            self.alarms,
+            unsigned_register(self.observer_flow_sd_lps, 100.0),
         ]
     }
 }
@@ -313,6 +352,12 @@ pub struct ScadaSlave {
     pub mode: Mode,
     /// NARMAX arithmetic.
     pub arithmetic: Arithmetic,
+    /// Holding registers 3 and 4 exist (a virtual bench).
+    virtual_bench: bool,
+    /// Virtual bench valve, 0.1 % of nominal k2 (500..=2000).
+    pub valve_permille: u16,
+    /// Virtual bench fault injection bits (0..=15).
+    pub faults: u16,
 }
 
 impl ScadaSlave {
@@ -323,12 +368,35 @@ impl ScadaSlave {
             setpoint: 0,
             mode: Mode::Stop,
             arithmetic: Arithmetic::F32,
+            virtual_bench: false,
+            valve_permille: VALVE_NOMINAL_PERMILLE,
+            faults: 0,
         })
     }
 
-    /// The holding registers.
+    /// The slave with holding registers 3 and 4 (the virtual bench's valve and faults).
+    pub fn with_virtual_bench(mut self) -> Self {
+        self.virtual_bench = true;
+        self
+    }
+
+    /// The holding registers (the last two exist only with a virtual bench).
     pub fn holding(&self) -> [u16; HOLDING_REGISTERS] {
-        [self.setpoint, self.mode as u16, self.arithmetic as u16]
+        [
+            self.setpoint,
+            self.mode as u16,
+            self.arithmetic as u16,
+            self.valve_permille,
+            self.faults,
+        ]
+    }
+
+    fn holding_count(&self) -> usize {
+        if self.virtual_bench {
+            HOLDING_REGISTERS
+        } else {
+            BOARD_HOLDING_REGISTERS
+        }
     }
 
     /// Handles one received RTU frame (the bytes between two silences). Returns the response
@@ -377,7 +445,11 @@ impl ScadaSlave {
                 }
                 3 | 4 => {
                     let holding = self.holding();
-                    let table: &[u16] = if func == 4 { inputs } else { &holding };
+                    let table: &[u16] = if func == 4 {
+                        inputs
+                    } else {
+                        &holding[..self.holding_count()]
+                    };
                     match mf.get_external_read() {
                         Ok(Read::Words(r)) => read_words(table, r.address, r.count, r.buf),
                         Ok(Read::Bits(_)) | Err(_) => Err(ErrorKind::IllegalFunction),
@@ -407,7 +479,7 @@ impl ScadaSlave {
     /// Applies a write of `count` registers at `address` (big-endian `data`), all or nothing.
     fn write_words(&mut self, address: u16, count: u16, data: &[u8]) -> Result<(), ErrorKind> {
         let end = usize::from(address) + usize::from(count);
-        if end > HOLDING_REGISTERS {
+        if end > self.holding_count() {
             return Err(ErrorKind::IllegalDataAddress);
         }
         let mut next = *self;
@@ -423,6 +495,8 @@ impl ScadaSlave {
                         _ => return Err(ErrorKind::IllegalDataValue),
                     }
                 }
+                3 if VALVE_RANGE_PERMILLE.contains(&v) => next.valve_permille = v,
+                4 if v <= 15 => next.faults = v,
                 _ => return Err(ErrorKind::IllegalDataValue),
             }
         }
@@ -491,6 +565,32 @@ mod tests {
         assert_eq!(s.arithmetic, Arithmetic::Fixed);
         let r = ask(&mut s, &frame(&[1, 4, 0, 17, 0, 1])).unwrap();
         assert_eq!(&r[..5], &[1, 4, 2, 0, 117]);
+        let r = ask(&mut s, &frame(&[1, 4, 0, 22, 0, 1])).unwrap();
+        assert_eq!(&r[..5], &[1, 4, 2, 0, 122], "observer registers up to 22");
+    }
+
+    #[test]
+    fn virtual_bench_registers_exist_only_with_one() {
+        let mut board = ScadaSlave::new(1).unwrap();
+        assert_eq!(
+            exception(&mut board, &[1, 3, 0, 3, 0, 1]),
+            2,
+            "no bench: 02"
+        );
+        assert_eq!(exception(&mut board, &[1, 6, 0, 3, 0x05, 0x14]), 2);
+        assert_eq!(exception(&mut board, &[1, 6, 0, 4, 0, 1]), 2);
+        let mut s = ScadaSlave::new(1).unwrap().with_virtual_bench();
+        let r = ask(&mut s, &frame(&[1, 3, 0, 0, 0, 5])).unwrap();
+        assert_eq!(&r[..13], &[1, 3, 10, 0, 0, 0, 0, 0, 0, 0x03, 0xE8, 0, 0]);
+        let w = frame(&[1, 6, 0, 3, 0x05, 0x14]);
+        assert_eq!(ask(&mut s, &w).unwrap(), w);
+        assert_eq!(s.valve_permille, 1300);
+        assert_eq!(exception(&mut s, &[1, 6, 0, 3, 0x01, 0xF3]), 3, "499");
+        assert_eq!(exception(&mut s, &[1, 6, 0, 3, 0x07, 0xD1]), 3, "2001");
+        assert_eq!(exception(&mut s, &[1, 6, 0, 4, 0, 16]), 3, "fault bit 4");
+        ask(&mut s, &frame(&[1, 6, 0, 4, 0, 0b1010])).unwrap();
+        assert_eq!(s.faults, 0b1010);
+        assert_eq!(exception(&mut s, &[1, 3, 0, 4, 0, 2]), 2, "past the map");
     }
 
     #[test]
@@ -507,7 +607,7 @@ mod tests {
             "unknown function"
         );
         assert_eq!(
-            exception(&mut s, &[1, 4, 0, 17, 0, 2]),
+            exception(&mut s, &[1, 4, 0, 22, 0, 2]),
             2,
             "past the input map"
         );

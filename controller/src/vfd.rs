@@ -145,6 +145,7 @@ pub struct VfdMaster {
     blind: bool,
     readings: VfdReadings,
     exchanges_ok: u32,
+    reads_ok: u32,
 }
 
 impl VfdMaster {
@@ -162,6 +163,7 @@ impl VfdMaster {
             blind: true,
             readings: VfdReadings::default(),
             exchanges_ok: 0,
+            reads_ok: 0,
         })
     }
 
@@ -186,6 +188,11 @@ impl VfdMaster {
     /// Successful exchanges so far.
     pub fn exchanges_ok(&self) -> u32 {
         self.exchanges_ok
+    }
+
+    /// Successful reads so far (wraps): a change means fresh readings.
+    pub fn reads_ok(&self) -> u32 {
+        self.reads_ok
     }
 
     /// The torque reference that is written for a requested one: 0 % during the link alarm.
@@ -278,6 +285,7 @@ impl VfdMaster {
             Kind::Read => {
                 self.read_failures_in_row = 0;
                 self.blind = false;
+                self.reads_ok = self.reads_ok.wrapping_add(1);
             }
         }
         self.exchanges_ok = self.exchanges_ok.wrapping_add(1);

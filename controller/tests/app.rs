@@ -25,6 +25,7 @@ fn setup(mode: Mode, setpoint: u16) -> (Loop, VirtualIo) {
     let cfg = AppConfig {
         initial_mode: mode,
         initial_setpoint: setpoint,
+        virtual_bench: true,
         ..AppConfig::bench()
     };
     let p = NarmaxModel::new(pressure_model::model().unwrap(), 50).unwrap();
@@ -257,6 +258,9 @@ impl Io for OneKindFails {
     fn vfd_receive(&mut self, now_ms: u32, frame: &mut Frame) -> bool {
         self.io.vfd_receive(now_ms, frame)
     }
+    fn virtual_bench(&mut self, valve_permille: u16, faults: u16) {
+        self.io.virtual_bench(valve_permille, faults)
+    }
 }
 
 fn run_faulty(app: &mut Loop, io: &mut OneKindFails, ms: u32) {
@@ -313,4 +317,75 @@ fn a_drive_that_takes_no_writes_forces_zero_and_one_that_gives_no_reads_is_flagg
     let regs = read_inputs(&mut app);
     assert_eq!(regs[0] & 0b100_1010, 0b000_1000, "all clear");
     assert!(regs[14] != 0 && regs[16] != 0, "readings back");
+}
+
+fn write_holding(app: &mut Loop, register: u8, value: u16) {
+    let [hi, lo] = value.to_be_bytes();
+    let mut r = Response::new();
+    let req = with_crc(&[1, 6, 0, register, hi, lo]);
+    let n = app.scada_frame(&req, &mut r).expect("an answer");
+    assert_eq!(&r[..n], &req[..], "write of holding {register} echoed");
+}
+
+fn read_observer(app: &mut Loop) -> (f32, f32, f32, u16) {
+    let mut r = Response::new();
+    let n = app
+        .scada_frame(&with_crc(&[1, 4, 0, 18, 0, 5]), &mut r)
+        .unwrap();
+    assert_eq!(n, 5 + 10);
+    let w = |i: usize| u16::from_be_bytes([r[3 + 2 * i], r[4 + 2 * i]]);
+    (
+        f32::from(w(0)) / 10.0,
+        f32::from(w(1)) / 100.0,
+        f32::from(w(2)) * 1e-5,
+        w(3),
+    )
+}
+
+/// What a user does over Modbus on the virtual bench: close the valve by 30 %, fail a
+/// transmitter, cut the drive's link, dry-run the pump; the estimate follows and the right
+/// alarm rises, and nothing else.
+#[test]
+fn the_observer_follows_the_valve_and_the_alarms_follow_injected_faults() {
+    use model_core::monitor::{DRY_RUN, LOAD_CHANGED, PRESSURE_TRANSMITTER, VFD_LINK};
+    let (mut app, mut io) = setup(Mode::Manual, 5000);
+    run(&mut app, &mut io, 5000);
+    let (w, q, k2, alarms) = read_observer(&mut app);
+    let truth = io.bench.signals();
+    println!(
+        "50 %: observer {w} rpm {q} l/s k2 {k2}, bench {} rpm {} l/s k2 {}",
+        truth.speed_rpm,
+        truth.flow_lps,
+        io.bench.valve_k2()
+    );
+    assert_eq!(alarms, 0, "no alarm at the operating point");
+    assert!(rel(w, truth.speed_rpm) < 0.01 && rel(q, truth.flow_lps) < 0.01);
+    assert!(rel(k2, io.bench.valve_k2()) < 0.03);
+
+    write_holding(&mut app, 3, 1300);
+    run(&mut app, &mut io, 3000);
+    let (_, q, k2, alarms) = read_observer(&mut app);
+    println!(
+        "valve 130 %: observer k2 {k2} (bench {}), flow {q} (bench {})",
+        io.bench.valve_k2(),
+        io.bench.signals().flow_lps
+    );
+    assert!(rel(k2, io.bench.valve_k2()) < 0.03, "k2 followed the valve");
+    assert_eq!(alarms, LOAD_CHANGED, "load changed, and only that");
+    write_holding(&mut app, 3, 1000);
+    run(&mut app, &mut io, 3000);
+    assert_eq!(read_observer(&mut app).3, 0, "back to nominal");
+
+    for (bit, fault) in [(PRESSURE_TRANSMITTER, 2u16), (VFD_LINK, 8), (DRY_RUN, 1)] {
+        write_holding(&mut app, 4, fault);
+        run(&mut app, &mut io, 4000);
+        let alarms = read_observer(&mut app).3;
+        println!("fault {fault}: alarms {alarms:#06x}");
+        assert!(
+            alarms & bit != 0,
+            "fault {fault}: alarm {bit:#x} in {alarms:#x}"
+        );
+        write_holding(&mut app, 4, 0);
+        run(&mut app, &mut io, 4000);
+    }
 }

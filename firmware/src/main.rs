@@ -35,7 +35,7 @@ mod models {
 mod nucleo;
 #[cfg(feature = "qemu")]
 mod qemu;
-#[cfg(feature = "qemu")]
+#[cfg(feature = "timing")]
 mod timing;
 
 /// Pressure model period, ms.

@@ -28,7 +28,8 @@
 //! enable=on,target=native,arg=firmware,arg=mode=2,…`), each `key=value`:
 //! `mode=0|1|2` (start-up mode, default 0 stop), `setpoint=0..10000` (0.01 %), `seed=N`
 //! (profile seed, default 1), `narmax=f32|q15` (NARMAX arithmetic), `run_ms=N` (exit 0 after N ms; default: run until QEMU is
-//! stopped), `vfd=uart`, `timing` (measure the loop and the models, print, exit). A bad
+//! stopped), `vfd=uart`, `timing` (measure the loop and the models, print, exit; only in an image built
+//! with the `timing` feature). A bad
 //! argument is reported and the firmware exits with status 1.
 
 use crate::{serve, start_systick, Board};
@@ -310,6 +311,9 @@ impl Io for QemuBoard {
             None => self.virt.vfd_send(frame),
         }
     }
+    fn virtual_bench(&mut self, valve_permille: u16, faults: u16) {
+        self.virt.apply(valve_permille, faults);
+    }
     fn vfd_receive(&mut self, now_ms: u32, frame: &mut Frame) -> bool {
         match &mut self.vfd_port {
             Some(port) => port.receive(now_ms, frame),
@@ -389,6 +393,7 @@ fn start(out: &mut hio::HostStream) -> Result<(), ()> {
         initial_setpoint: args.setpoint,
         profile_seed: args.seed,
         initial_arithmetic: args.arithmetic,
+        virtual_bench: true,
         ..AppConfig::bench()
     };
     let fail = |out: &mut hio::HostStream, e: &dyn core::fmt::Display| {
@@ -411,7 +416,16 @@ fn start(out: &mut hio::HostStream) -> Result<(), ()> {
     let virt = VirtualIo::new(bench, config.vfd).ok_or(())?;
     let cp = cortex_m::Peripherals::take().ok_or(())?;
     if args.timing {
+        #[cfg(feature = "timing")]
         return crate::timing::report(cp.SYST, &mut app, virt, out).map_err(|_| ());
+        #[cfg(not(feature = "timing"))]
+        {
+            let _ = writeln!(
+                out,
+                "error: this image has no timing run: build it with `--features timing` (cargo xtask qemu does)"
+            );
+            return Err(());
+        }
     }
     let dp = pac::Peripherals::take().ok_or(())?;
     dp.RCC.apb2enr().modify(|_, w| w.usart1en().set_bit());

@@ -6,7 +6,9 @@ use crate::{models, Loop};
 use controller::bench::VirtualIo;
 use core::fmt::Write;
 use cortex_m::peripheral::{syst::SystClkSource, SYST};
+use model_core::monitor::{Monitor, MonitorConfig, MonitorInputs};
 use model_core::narmax::fixed::NarmaxQ;
+use model_core::observer::{Measurements, Observer, ObserverConfig};
 use model_core::{Scheme, WhiteBox};
 
 /// SysTick's 24-bit counter mask.
@@ -98,7 +100,50 @@ pub fn report(
         c[2].time(|| q.simulate_step(&mut sq, u));
         c[3].time(|| qq.simulate_step(&mut sqq, u));
     }
+    // The observer on a bench of its own, the torque stepping 30 ↔ 70 % every 2 s: each
+    // update with a pressure reading, every other with flow, every one with the VFD's speed
+    // (the most a 50 ms update does).
+    let mut obs =
+        Observer::<f32>::new(ObserverConfig::paper(), 30.0).map_err(|_| core::fmt::Error)?;
+    let mut mon = Monitor::<f32>::new(MonitorConfig::paper());
+    let mut st = bench.steady_state(30.0).map_err(bad)?;
+    let (mut upd, mut alarms) = (Cost::default(), Cost::default());
+    for k in 0..MODEL_CALLS {
+        let u = if k % 80 < 40 { 30.0 } else { 70.0 };
+        for _ in 0..50 {
+            bench.step(&mut st, u, 1e-3, Scheme::Rk4).map_err(bad)?;
+        }
+        let s = bench.signals(&st);
+        let m = Measurements {
+            pressure_mca: Some(s.pressure_mca),
+            flow_lps: (k % 2 == 1).then_some(s.flow_lps),
+            speed_rpm: Some(s.speed_rpm),
+        };
+        let e = upd
+            .time(|| obs.step(0.05, u, &m))
+            .map_err(|_| core::fmt::Error)?;
+        alarms.time(|| {
+            mon.update(&MonitorInputs {
+                dt_s: 0.05,
+                estimate: e,
+                torque_ref_pct: u,
+                vfd_torque_pct: Some(u),
+                vfd_speed_rpm: Some(s.speed_rpm),
+                measured_flow_lps: m.flow_lps,
+                pressure_fault: false,
+                flow_fault: false,
+                vfd_link_alarm: false,
+            })
+        });
+    }
     writeln!(out, "timing rk4 systick_ticks_per_step={}", rk4.mean())?;
+    writeln!(
+        out,
+        "timing observer systick_ticks_per_update mean={} max={} monitor={}",
+        upd.mean(),
+        upd.max,
+        alarms.mean()
+    )?;
     writeln!(
         out,
         "timing narmax systick_ticks_per_step pressure_f32={} pressure_q15={} flow_f32={} flow_q15={}",

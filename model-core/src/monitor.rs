@@ -10,7 +10,7 @@
 //! | 4 | no flow / closed valve | estimated flow below `threshold` l/s above `min_speed_rpm`, or k2 above `closed_valve_k2_ratio` × its reference | no |
 //! | 5 | end of curve (run-out) | estimated or measured flow above `threshold` l/s (the fitted range ends at 27.8) | no |
 //! | 6 | load changed | k2 more than `threshold` (a fraction) from its reference | no (informational) |
-//! | 7 | model residual | the innovations' normalised square, averaged over `residual_tau_s`, above `threshold` | no |
+//! | 7 | model residual | the innovations' normalised square (each capped at `residual_nis_cap`), averaged over `residual_tau_s`, above `threshold` | no |
 //!
 //! A latched alarm stays after its cause has gone until [`Monitor::acknowledge`]; an
 //! unlatched one clears once its clearing condition (threshold moved by the hysteresis) has
@@ -73,6 +73,10 @@ pub struct MonitorConfig<T> {
     pub residual: AlarmConfig<T>,
     /// Time constant of the innovation average, s: 2.
     pub residual_tau_s: T,
+    /// Largest normalised square one sample adds to the average: 36 (the observer's 6 σ
+    /// gate), so that the burst of a valve step (a few samples of thousands) does not raise
+    /// the alarm, while a lasting inconsistency (a stuck transmitter) does.
+    pub residual_nis_cap: T,
     /// Speeds below this do not judge dry run or no flow, rpm: 500.
     pub min_speed_rpm: T,
     /// Reference k2 (the commissioned valve): the paper's 0.1082.
@@ -101,6 +105,7 @@ impl<T: Real> MonitorConfig<T> {
             load_changed: rule(0.15, 0.05, 1.0, 1.0, false),
             residual: rule(12.0, 6.0, 3.0, 2.0, false),
             residual_tau_s: f(2.0),
+            residual_nis_cap: f(36.0),
             min_speed_rpm: f(500.0),
             k2_reference: BenchParams::<T>::paper().valve_k2,
             pass_through_s: T::ZERO,
@@ -304,7 +309,7 @@ impl<T: Real> Monitor<T> {
         let mut nis = T::ZERO;
         for i in [e.pressure, e.flow, e.speed] {
             if matches!(i.used, Use::Used | Use::Rejected) && i.nis.is_finite() {
-                nis = nis.max(i.nis);
+                nis = nis.max(i.nis.min(c.residual_nis_cap));
             }
         }
         if dt > T::ZERO && c.residual_tau_s > T::ZERO {

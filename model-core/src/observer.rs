@@ -66,7 +66,7 @@ pub const FLOW_LAGGED: usize = 5;
 
 /// Longest sub-step of the mean's integration, s.
 pub const MAX_SUBSTEP_S: f64 = 0.025;
-/// Longest `dt` of one [`Observer::step`], s.
+/// Longest `dt` of one [`Observer::step`], s (the error message repeats it).
 pub const MAX_DT_S: f64 = 10.0;
 /// Water density × g, W per (l/s · m): hydraulic power P = 9.81 · Q[l/s] · H[m].
 pub const RHO_G_W_PER_LPS_M: f64 = 9.806_65;
@@ -192,7 +192,8 @@ impl core::fmt::Display for ObserverError {
         match self {
             ObserverError::Model(e) => write!(f, "observer model: {e}"),
             ObserverError::Config => f.write_str("observer configuration out of range"),
-            ObserverError::Step => write!(f, "observer step must be in (0, {MAX_DT_S}] s"),
+            // A literal, not `{MAX_DT_S}`: float formatting would cost the MCU ≈ 10 KB.
+            ObserverError::Step => f.write_str("observer step must be in (0, 10] s"),
         }
     }
 }
@@ -325,6 +326,7 @@ pub struct Observer<T> {
     p: Matrix<T>,
     flow_warm: T,
     rejections: [u8; 3],
+    step_consts: StepConsts<T>,
     /// Set by every reset; `Option` only to build the observer before its first estimate.
     last: Option<Estimate<T>>,
 }
@@ -354,6 +356,7 @@ impl<T: Real> Observer<T> {
             p: [[T::ZERO; STATES]; STATES],
             flow_warm: T::ZERO,
             rejections: [0; 3],
+            step_consts: StepConsts::new(&config, T::from_f64(0.05)),
             last: None,
         };
         o.reset(torque_ref_pct);
@@ -417,7 +420,8 @@ impl<T: Real> Observer<T> {
         self.last.unwrap_or_else(|| unreachable_estimate(&self.x))
     }
 
-    fn hydraulics(&mut self, x: &Vector<T>) -> Hydraulics<T> {
+    /// Flow at `x` (warm-started from the last solve).
+    fn flow(&mut self, x: &Vector<T>) -> T {
         let par = &self.cfg.params;
         let (w, k2, s_h) = (x[SPEED], x[K2], x[HEAD_SCALE]);
         let mut g = CubicInFlow::from_poly(&par.alpha, w);
@@ -427,6 +431,22 @@ impl<T: Real> Observer<T> {
         g.c0 = g.c0 * s_h + par.static_head_c_mca;
         let q = solve_flow(&g, self.flow_warm).flow_lps;
         self.flow_warm = q;
+        q
+    }
+
+    /// dω/dt at `x` with electromagnetic torque `te`, and the flow there: the mean's
+    /// integration needs no partials.
+    fn speed_rate_lean(&mut self, x: &Vector<T>, te: T) -> (T, T) {
+        let q = self.flow(x);
+        let load = CubicInFlow::from_poly(&self.cfg.params.beta, x[SPEED]).eval(q);
+        (self.accel * (te - x[TORQUE_SCALE] * load), q)
+    }
+
+    /// Flow at `x` with the partials the linearisation and the standard deviations need.
+    fn hydraulics(&mut self, x: &Vector<T>) -> Hydraulics<T> {
+        let q = self.flow(x);
+        let par = &self.cfg.params;
+        let (w, k2, s_h) = (x[SPEED], x[K2], x[HEAD_SCALE]);
         let (head, head_w, head_q) = poly_with_partials(&par.alpha, w, q);
         let (torque, torque_w, torque_q) = poly_with_partials(&par.beta, w, q);
         let two = T::from_f64(2.0);
@@ -457,12 +477,6 @@ impl<T: Real> Observer<T> {
         x[K2] * x[K2] * q * q - self.cfg.params.static_head_c_mca
     }
 
-    /// dω/dt at `x` with electromagnetic torque `te`, and the hydraulics there.
-    fn speed_rate(&mut self, x: &Vector<T>, te: T) -> (T, Hydraulics<T>) {
-        let h = self.hydraulics(x);
-        (self.accel * (te - x[TORQUE_SCALE] * h.torque), h)
-    }
-
     /// Advances by `dt_s` seconds with the torque reference `torque_ref_pct` held (NaN → 0,
     /// clamped to 0..=100 %), then takes the measurements that arrived. Returns the estimate.
     pub fn step(
@@ -476,16 +490,11 @@ impl<T: Real> Observer<T> {
         }
         let (x0, p0, warm0) = (self.x, self.p, self.flow_warm);
         self.predict(dt_s, clamp_torque(torque_ref_pct));
-        let h = self.hydraulics(&self.x.clone());
         let pressure = self.update_pressure(m.pressure_mca);
         let flow = self.update_flow(m.flow_lps);
         let speed = self.update_speed(m.speed_rpm);
         self.bound();
-        let h = if pressure.used == Use::Used || flow.used == Use::Used || speed.used == Use::Used {
-            self.hydraulics(&self.x.clone())
-        } else {
-            h
-        };
+        let h = self.hydraulics(&self.x.clone());
         let e = self.estimate(&h, pressure, flow, speed);
         if self.healthy() && estimate_finite(&e) {
             self.last = Some(e);
@@ -500,7 +509,11 @@ impl<T: Real> Observer<T> {
         let cfg = self.cfg;
         let te = electromagnetic_torque_pct(&cfg.params.gamma, u);
         // Transition matrix, linearised at the start.
-        let (_, h0) = self.speed_rate(&self.x.clone(), te);
+        let h0 = self.hydraulics(&self.x.clone());
+        if dt != self.step_consts.dt {
+            self.step_consts = StepConsts::new(&cfg, dt);
+        }
+        let k = self.step_consts;
         let two = T::from_f64(2.0);
         let s_t = self.x[TORQUE_SCALE];
         let a = self.accel;
@@ -525,14 +538,7 @@ impl<T: Real> Observer<T> {
             two * k2 * k2 * q0 * h0.dq[1] + two * k2 * q0 * q0,
             two * k2 * k2 * q0 * h0.dq[2],
         ];
-        let decay = |tau: T| {
-            if tau > T::ZERO {
-                (-dt / tau).exp()
-            } else {
-                T::ZERO
-            }
-        };
-        let (ap, aq) = (decay(cfg.pressure_lag_s), decay(cfg.flow_lag_s));
+        let (ap, aq) = (k.pressure_decay, k.flow_decay);
         phi[PRESSURE_LAGGED][PRESSURE_LAGGED] = ap;
         phi[FLOW_LAGGED][FLOW_LAGGED] = aq;
         for j in 0..4 {
@@ -547,23 +553,22 @@ impl<T: Real> Observer<T> {
         }
 
         // The mean: Heun in sub-steps, the lags exact for a target held over a sub-step.
-        let n = ceil_steps(dt.to_f64() / MAX_SUBSTEP_S);
-        let h = dt / T::from_f64(n as f64);
-        let lag_p = Lag::new(cfg.pressure_lag_s, h);
-        let lag_q = Lag::new(cfg.flow_lag_s, h);
+        let h = k.substep_s;
         let (mut hs_start, mut q_start) = (self.outlet_pressure(&self.x, h0.flow), h0.flow);
-        for _ in 0..n {
+        // dω/dt at the start of a sub-step: the end of the last one's.
+        let mut rate = self.accel * (te - s_t * h0.torque);
+        for _ in 0..k.substeps {
             let x = self.x;
-            let (k1, _) = self.speed_rate(&x, te);
             let mut xe = x;
-            xe[SPEED] = x[SPEED] + h * k1;
-            let (k2r, _) = self.speed_rate(&xe, te);
-            self.x[SPEED] = x[SPEED] + h * (k1 + k2r) / two;
-            let hyd = self.hydraulics(&self.x.clone());
-            let hs_end = self.outlet_pressure(&self.x, hyd.flow);
-            self.x[PRESSURE_LAGGED] = lag_p.advance(self.x[PRESSURE_LAGGED], hs_start, hs_end);
-            self.x[FLOW_LAGGED] = lag_q.advance(self.x[FLOW_LAGGED], q_start, hyd.flow);
-            (hs_start, q_start) = (hs_end, hyd.flow);
+            xe[SPEED] = x[SPEED] + h * rate;
+            let (rate_e, _) = self.speed_rate_lean(&xe, te);
+            self.x[SPEED] = x[SPEED] + h * (rate + rate_e) / two;
+            let (rate_end, q_end) = self.speed_rate_lean(&self.x.clone(), te);
+            rate = rate_end;
+            let hs_end = self.outlet_pressure(&self.x, q_end);
+            self.x[PRESSURE_LAGGED] = k.lag_p.advance(self.x[PRESSURE_LAGGED], hs_start, hs_end);
+            self.x[FLOW_LAGGED] = k.lag_q.advance(self.x[FLOW_LAGGED], q_start, q_end);
+            (hs_start, q_start) = (hs_end, q_end);
         }
 
         // P = Φ P Φᵀ + Q, with rows K2, HEAD_SCALE, TORQUE_SCALE of Φ the identity.
@@ -714,15 +719,21 @@ impl<T: Real> Observer<T> {
                 .all(|(i, row)| row[i] > T::ZERO && row.iter().all(|v| v.is_finite()))
     }
 
-    /// Standard deviation of `jᵀ x` (linearised).
+    /// Standard deviation of `jᵀ x` (linearised) for a `j` that only weighs the first four
+    /// states (speed, k2 and the scales: what every derived quantity depends on).
     fn sd(&self, j: &Vector<T>) -> T {
         let mut v = T::ZERO;
-        for (a, row) in self.p.iter().enumerate() {
-            for (b, pab) in row.iter().enumerate() {
-                v += j[a] * *pab * j[b];
+        for a in 0..4 {
+            for b in 0..4 {
+                v += j[a] * self.p[a][b] * j[b];
             }
         }
         v.max(T::ZERO).sqrt()
+    }
+
+    /// Standard deviation of state `i`.
+    fn sd_state(&self, i: usize) -> T {
+        self.p[i][i].max(T::ZERO).sqrt()
     }
 
     fn estimate(
@@ -736,11 +747,6 @@ impl<T: Real> Observer<T> {
         let x = &self.x;
         let par = &self.cfg.params;
         let (k2, q, s_h) = (x[K2], h.flow, x[HEAD_SCALE]);
-        let unit = |i: usize| {
-            let mut v = [T::ZERO; STATES];
-            v[i] = T::ONE;
-            v
-        };
         let j_q = [h.dq[0], h.dq[1], h.dq[2], T::ZERO, T::ZERO, T::ZERO];
         let mut j_p: Vector<T> = core::array::from_fn(|a| two * k2 * k2 * q * j_q[a]);
         j_p[K2] += two * k2 * q * q;
@@ -765,12 +771,12 @@ impl<T: Real> Observer<T> {
             pipe_loss_mca: pipe,
             hydraulic_power_w: power,
             load_torque_pct: x[TORQUE_SCALE] * h.torque,
-            speed_sd_rpm: self.sd(&unit(SPEED)),
+            speed_sd_rpm: self.sd_state(SPEED),
             flow_sd_lps: self.sd(&j_q),
             pressure_sd_mca: self.sd(&j_p),
-            valve_k2_sd: self.sd(&unit(K2)),
-            head_scale_sd: self.sd(&unit(HEAD_SCALE)),
-            torque_scale_sd: self.sd(&unit(TORQUE_SCALE)),
+            valve_k2_sd: self.sd_state(K2),
+            head_scale_sd: self.sd_state(HEAD_SCALE),
+            torque_scale_sd: self.sd_state(TORQUE_SCALE),
             pump_head_sd_mca: self.sd(&j_h),
             pipe_loss_sd_mca: self.sd(&j_pipe),
             hydraulic_power_sd_w: self.sd(&j_pow),
@@ -820,19 +826,48 @@ fn clamp_torque<T: Real>(u: T) -> T {
     }
 }
 
-/// Sub-steps for a ratio `dt / MAX_SUBSTEP_S` (≥ 1; dt ≤ MAX_DT_S keeps it ≤ 400).
-fn ceil_steps(ratio: f64) -> u32 {
-    let n = ratio as u32;
-    if (n as f64) < ratio {
-        n + 1
-    } else {
-        n.max(1)
+/// What a step's `dt` fixes, computed again only when `dt` changes (the loop's is constant):
+/// the sub-steps, the lags' decays over `dt` and their ramp-exact updates over a sub-step.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct StepConsts<T> {
+    dt: T,
+    substeps: u32,
+    substep_s: T,
+    pressure_decay: T,
+    flow_decay: T,
+    lag_p: Lag<T>,
+    lag_q: Lag<T>,
+}
+
+impl<T: Real> StepConsts<T> {
+    fn new(cfg: &ObserverConfig<T>, dt: T) -> Self {
+        // ≥ 1; dt ≤ MAX_DT_S keeps it ≤ 400.
+        let ratio = (dt / T::from_f64(MAX_SUBSTEP_S)).to_f64();
+        let n = ratio as u32;
+        let substeps = if (n as f64) < ratio { n + 1 } else { n.max(1) };
+        let substep_s = dt / T::from_f64(substeps as f64);
+        let decay = |tau: T| {
+            if tau > T::ZERO {
+                (-dt / tau).exp()
+            } else {
+                T::ZERO
+            }
+        };
+        Self {
+            dt,
+            substeps,
+            substep_s,
+            pressure_decay: decay(cfg.pressure_lag_s),
+            flow_decay: decay(cfg.flow_lag_s),
+            lag_p: Lag::new(cfg.pressure_lag_s, substep_s),
+            lag_q: Lag::new(cfg.flow_lag_s, substep_s),
+        }
     }
 }
 
 /// A first-order lag `τ` over a step `h`, exact for a target that moves linearly across the
 /// step: `x₁ = a x₀ + y₁ − a y₀ − (y₁ − y₀)(τ/h)(1 − a)`, `a = e^{−h/τ}` (τ = 0: `x₁ = y₁`).
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 struct Lag<T> {
     a: T,
     /// (τ/h)(1 − a).
