@@ -4,7 +4,8 @@
 //!
 //! What is added (constants below, per signal):
 //! - a first-order transmitter lag (pressure 20 ms; flow 40 ms, a transmitter that settles in
-//!   about 100 ms as the paper's does; speed none);
+//!   about 100 ms as the paper's does; speed none); the pressure and flow lags can be set
+//!   (`--pressure-lag-ms`, `--flow-lag-ms`, 0..2000 ms);
 //! - Gaussian noise (pressure 0.003 mca, flow 0.02 l/s, speed 0.5 rpm, 1 σ);
 //! - 12-bit quantisation of the 4-20 mA loop: an ADC reading 0..24 mA in 4096 codes, a
 //!   transmitter span of 0..10 mca (pressure) and 0..30 l/s (flow): one code is 3.7 mm of
@@ -12,12 +13,28 @@
 //!
 //! Not modelled: water-column inertia, transmitter drift and offsets, VFD torque ripple.
 //! The bench itself is the paper's white-box model in f64, integrated with RK4 at ≤ 1 ms.
+//!
+//! The bench can be made to differ from the paper's model, so that an observer built on that
+//! model can be tested against a known truth ([`Options`]):
+//! - valve steps (`--valve-steps T:FACTOR,...`): from time T the valve coefficient k2 is FACTOR
+//!   times the paper's 0.1082 √mca/(l/s) (c unchanged); FACTOR > 1 closes the valve (less flow,
+//!   more pressure);
+//! - a curve error (`--curve-error PCT`): the true pump-head curve is the paper's F_H (eq. 5,
+//!   all ten α) times (1 + PCT/100), the true load-torque curve the paper's F_T (eq. 6, all ten
+//!   β) times (1 − PCT/100): PCT > 0 is a stronger pump and a lighter load than the paper's
+//!   fits, PCT < 0 a weaker pump and a heavier load;
+//! - `--truth` adds the bench's true state at each row's time (before lag, noise and
+//!   quantisation): `speed_true` (rpm), `flow_true` (l/s), `pressure_true` (mca) and
+//!   `k2_true` (√mca/(l/s)).
+//!
+//! With none of these (or all at their defaults) the record is byte for byte what it was
+//! before they existed.
 
-use crate::input::TorqueInput;
+use crate::input::{shown, TorqueInput};
 use crate::num::Short;
 use crate::Failure;
 use model_core::excitation::SplitMix64;
-use model_core::{BenchState, Scheme, WhiteBox, MAX_STEP_S};
+use model_core::{BenchParams, BenchState, Scheme, WhiteBox, MAX_STEP_S};
 use std::io::Write;
 
 /// Transmitter model of one signal.
@@ -93,54 +110,270 @@ pub const STEP_MS: f64 = 1.0;
 /// [`crate::input::read_input_to_integrate`]).
 pub const TOO_MANY_STEPS: &str = "bench-data integrates in steps of 1 ms: use a shorter input";
 
-/// Writes the synthetic record of `input`: one row per input row, the readings at that time.
+/// A valve step: from `t_s` on (s, of the input's times), the valve coefficient k2 is
+/// `factor` times its nominal value (the paper's k2).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ValveStep {
+    /// Time of the step, s.
+    pub t_s: f64,
+    /// k2 over the nominal k2 (> 1: the valve closes).
+    pub factor: f64,
+}
+
+/// Smallest valve factor accepted.
+pub const VALVE_FACTOR_MIN: f64 = 0.2;
+/// Largest valve factor accepted.
+pub const VALVE_FACTOR_MAX: f64 = 5.0;
+/// Largest |curve error| accepted, %.
+pub const CURVE_ERROR_MAX_PCT: f64 = 20.0;
+/// Longest transmitter lag accepted, ms.
+pub const LAG_MAX_MS: f64 = 2000.0;
+
+/// How the bench of a record differs from the paper's model, and what is written.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Options {
+    /// Seed of the noise.
+    pub seed: u64,
+    /// Valve steps, times strictly increasing (see [`parse_valve_steps`]).
+    pub valve_steps: Vec<ValveStep>,
+    /// Curve error, %: F_H × (1 + pct/100), F_T × (1 − pct/100) (see [`true_bench`]).
+    pub curve_error_pct: f64,
+    /// Write the true state columns too.
+    pub truth: bool,
+    /// Flow transmitter lag, s.
+    pub flow_lag_s: f64,
+    /// Pressure transmitter lag, s.
+    pub pressure_lag_s: f64,
+}
+
+impl Options {
+    /// The record as it always was: the paper's bench, the default lags, no truth columns.
+    pub fn with_seed(seed: u64) -> Self {
+        Options {
+            seed,
+            valve_steps: Vec::new(),
+            curve_error_pct: 0.0,
+            truth: false,
+            flow_lag_s: FLOW.tau_s,
+            pressure_lag_s: PRESSURE.tau_s,
+        }
+    }
+}
+
+/// `text` as a finite number, or a one-line message naming `option`.
+fn finite(option: &str, text: &str) -> Result<f64, String> {
+    let t = text.trim();
+    match t.parse::<f64>() {
+        Ok(v) if v.is_finite() => Ok(v),
+        Ok(_) => Err(format!("{option} '{}': not a finite number", shown(t))),
+        Err(_) => Err(format!("{option} '{}': not a number", shown(t))),
+    }
+}
+
+/// Parses `--valve-steps T:FACTOR,...`: times (s) finite and strictly increasing, factors
+/// within [`VALVE_FACTOR_MIN`]..=[`VALVE_FACTOR_MAX`]. The message names the bad item.
+pub fn parse_valve_steps(text: &str) -> Result<Vec<ValveStep>, String> {
+    if text.trim().is_empty() {
+        return Err(
+            "--valve-steps: no steps given: expected T:FACTOR,... (e.g. 20:1.3,40:0.7)".into(),
+        );
+    }
+    let mut steps: Vec<ValveStep> = Vec::new();
+    for (k, item) in text.split(',').enumerate() {
+        let bad = |why: String| format!("--valve-steps: item {} '{}': {why}", k + 1, shown(item));
+        let Some((t, f)) = item.split_once(':') else {
+            return Err(bad(
+                "expected T:FACTOR (time in s, factor of the nominal k2)".into(),
+            ));
+        };
+        let number = |what: &str, text: &str| -> Result<f64, String> {
+            let text = text.trim();
+            match text.parse::<f64>() {
+                Ok(v) if v.is_finite() => Ok(v),
+                Ok(_) => Err(bad(format!(
+                    "{what} '{}' is not a finite number",
+                    shown(text)
+                ))),
+                Err(_) => Err(bad(format!("{what} '{}' is not a number", shown(text)))),
+            }
+        };
+        let t_s = number("time", t)?;
+        let factor = number("factor", f)?;
+        if !(VALVE_FACTOR_MIN..=VALVE_FACTOR_MAX).contains(&factor) {
+            return Err(bad(format!(
+                "factor {} is outside {}..{}",
+                Short(factor),
+                Short(VALVE_FACTOR_MIN),
+                Short(VALVE_FACTOR_MAX)
+            )));
+        }
+        if let Some(prev) = steps.last() {
+            if !(t_s > prev.t_s) {
+                return Err(bad(format!(
+                    "time {} s is not after the previous step's {} s",
+                    Short(t_s),
+                    Short(prev.t_s)
+                )));
+            }
+        }
+        steps.push(ValveStep { t_s, factor });
+    }
+    Ok(steps)
+}
+
+/// Parses `--curve-error PCT`: finite, |PCT| ≤ [`CURVE_ERROR_MAX_PCT`].
+pub fn parse_curve_error(text: &str) -> Result<f64, String> {
+    let pct = finite("--curve-error", text)?;
+    if pct.abs() <= CURVE_ERROR_MAX_PCT {
+        Ok(pct)
+    } else {
+        Err(format!(
+            "--curve-error {}: must be within -{m}..{m} %",
+            Short(pct),
+            m = Short(CURVE_ERROR_MAX_PCT)
+        ))
+    }
+}
+
+/// Parses a transmitter lag in ms (`option` names it in the message): finite, within
+/// 0..=[`LAG_MAX_MS`]. Returns seconds.
+pub fn parse_lag_ms(option: &str, text: &str) -> Result<f64, String> {
+    let ms = finite(option, text)?;
+    if (0.0..=LAG_MAX_MS).contains(&ms) {
+        // A division, so 40 ms is exactly the 0.040 s of the default.
+        Ok(ms / 1000.0)
+    } else {
+        // The limit in plain notation (Short would write 2e3).
+        Err(format!(
+            "{option} {}: must be within 0..{LAG_MAX_MS} ms",
+            Short(ms)
+        ))
+    }
+}
+
+/// The true bench for a curve error of `pct` %: the paper's parameters with every α (pump head
+/// F_H, eq. 5) times (1 + pct/100) and every β (load torque F_T, eq. 6) times (1 − pct/100).
+/// Positive `pct`: a stronger pump and a lighter load than the paper's fits. 0 gives the paper's
+/// bench exactly. The message (one line) says why the parameters are refused.
+pub fn true_bench(pct: f64) -> Result<WhiteBox<f64>, String> {
+    let mut p = BenchParams::<f64>::paper();
+    let head = 1.0 + pct / 100.0;
+    let load = 1.0 - pct / 100.0;
+    p.alpha.iter_mut().for_each(|a| *a *= head);
+    p.beta.iter_mut().for_each(|b| *b *= load);
+    WhiteBox::new(p).map_err(|e| {
+        format!(
+            "--curve-error {}: the scaled pump-head and load-torque curves are refused: {e}",
+            Short(pct)
+        )
+    })
+}
+
+/// Writes the synthetic record of `input`: one row per input row, the readings at that time
+/// (then, with [`Options::truth`], the true state at that time).
 ///
 /// The input's times are checked by [`crate::input::read_input_to_integrate`] with
 /// [`STEP_MS`], as `simulate` checks them.
-pub fn run(input: &TorqueInput, seed: u64, w: &mut dyn Write) -> Result<(), Failure> {
+///
+/// A valve step at time T is applied before the first integration step that starts at or after
+/// T, so the first row with a time ≥ T shows it in `k2_true`; the steps at or before the first
+/// row's time set the valve the bench starts with (at its steady state). The new k2 changes the
+/// flow and pressure at once (the flow loop has no inertia in the model); the readings follow
+/// through their transmitter lags.
+pub fn run(input: &TorqueInput, o: &Options, w: &mut dyn Write) -> Result<(), Failure> {
     let fail = |m: String| Failure {
         code: 1,
         message: m,
     };
-    let bench = WhiteBox::<f64>::paper();
+    let mut bench =
+        true_bench(o.curve_error_pct).map_err(|message| Failure { code: 2, message })?;
+    let nominal_k2 = bench.params().valve_k2;
+    let static_head_c_mca = bench.params().static_head_c_mca;
+    let pressure = Transmitter {
+        tau_s: o.pressure_lag_s,
+        ..PRESSURE
+    };
+    let flow = Transmitter {
+        tau_s: o.flow_lag_s,
+        ..FLOW
+    };
+    let mut pending = o.valve_steps.iter().peekable();
+    // Sets the valve of the last step due at time `t` (those before it lasted no time).
+    let mut valve_at = |bench: &mut WhiteBox<f64>, t: f64| -> Result<(), Failure> {
+        let mut factor = None;
+        while let Some(step) = pending.next_if(|s| s.t_s <= t) {
+            factor = Some(step.factor);
+        }
+        match factor {
+            Some(f) => bench
+                .set_load(nominal_k2 * f, static_head_c_mca)
+                .map_err(|e| fail(format!("model: {e}"))),
+            None => Ok(()),
+        }
+    };
+    valve_at(&mut bench, input.t_s[0])?;
     let mut state: BenchState<f64> = bench
         .steady_state(input.torque_ref_pct[0])
         .map_err(|e| fail(format!("model: {e}")))?;
-    let mut rng = SplitMix64::new(seed);
+    let mut rng = SplitMix64::new(o.seed);
     let s0 = bench.signals(&state);
     let (mut p, mut q, mut s) = (s0.pressure_mca, s0.flow_lps, s0.speed_rpm);
-    writeln!(w, "t_s,torque_ref_pct,speed_rpm,flow_lps,pressure_mca")
-        .map_err(|e| fail(format!("cannot write the output: {e}")))?;
+    let write_fail = |e: std::io::Error| fail(format!("cannot write the output: {e}"));
+    write!(w, "t_s,torque_ref_pct,speed_rpm,flow_lps,pressure_mca").map_err(write_fail)?;
+    if o.truth {
+        write!(w, ",speed_true,flow_true,pressure_true,k2_true").map_err(write_fail)?;
+    }
+    writeln!(w).map_err(write_fail)?;
     for i in 0..input.t_s.len() {
         if i > 0 {
             let u = input.torque_ref_pct[i - 1];
-            let dt = input.t_s[i] - input.t_s[i - 1];
+            let t0 = input.t_s[i - 1];
+            let dt = input.t_s[i] - t0;
             let n = (dt / (STEP_MS * 1e-3) - 1e-9).ceil().max(1.0) as u64;
             let h = dt / n as f64;
-            for _ in 0..n {
+            for k in 0..n {
+                if k > 0 {
+                    // (k = 0 starts at the previous row's time: its steps are applied.)
+                    valve_at(&mut bench, t0 + k as f64 * h)?;
+                }
                 // One step of h (h <= 1 ms < MAX_STEP_S), also below model-core's 1 µs
                 // smallest step, as `simulate` integrates a short interval.
                 bench
                     .advance(&mut state, u, h, MAX_STEP_S, Scheme::Rk4)
                     .map_err(|e| fail(format!("model: {e}")))?;
                 let sig = bench.signals(&state);
-                PRESSURE.lag(&mut p, sig.pressure_mca, h);
-                FLOW.lag(&mut q, sig.flow_lps, h);
+                pressure.lag(&mut p, sig.pressure_mca, h);
+                flow.lag(&mut q, sig.flow_lps, h);
                 SPEED.lag(&mut s, sig.speed_rpm, h);
             }
         }
+        valve_at(&mut bench, input.t_s[i])?;
         // Times and torques as given (shortest round-trip form); the readings at the
         // resolution of a logger.
-        writeln!(
+        write!(
             w,
             "{},{},{:.2},{:.4},{:.5}",
             Short(input.t_s[i]),
             Short(input.torque_ref_pct[i]),
             SPEED.read(s, &mut rng),
-            FLOW.read(q, &mut rng),
-            PRESSURE.read(p, &mut rng)
+            flow.read(q, &mut rng),
+            pressure.read(p, &mut rng)
         )
-        .map_err(|e| fail(format!("cannot write the output: {e}")))?;
+        .map_err(write_fail)?;
+        if o.truth {
+            // The true state in shortest round-trip form (not a reading: no logger rounding).
+            let sig = bench.signals(&state);
+            write!(
+                w,
+                ",{},{},{},{}",
+                Short(sig.speed_rpm),
+                Short(sig.flow_lps),
+                Short(sig.pressure_mca),
+                Short(bench.params().valve_k2)
+            )
+            .map_err(write_fail)?;
+        }
+        writeln!(w).map_err(write_fail)?;
     }
     Ok(())
 }
@@ -167,6 +400,87 @@ mod tests {
             (mean - 15.0).abs() < 0.01 && (sd - 0.022).abs() < 0.004,
             "{mean} {sd}"
         );
+    }
+
+    #[test]
+    fn default_options_are_the_paper_bench_and_the_old_lags_exactly() {
+        // The defaults of the command line give the constants bit for bit.
+        let flow = parse_lag_ms("--flow-lag-ms", "40").unwrap();
+        let pressure = parse_lag_ms("--pressure-lag-ms", "20").unwrap();
+        assert_eq!(flow.to_bits(), FLOW.tau_s.to_bits());
+        assert_eq!(pressure.to_bits(), PRESSURE.tau_s.to_bits());
+        assert_eq!(parse_curve_error("0").unwrap(), 0.0);
+        let o = Options::with_seed(3);
+        assert_eq!((o.flow_lag_s, o.pressure_lag_s), (flow, pressure));
+        assert_eq!(true_bench(0.0).unwrap(), WhiteBox::<f64>::paper());
+        assert_eq!(true_bench(-0.0).unwrap(), WhiteBox::<f64>::paper());
+    }
+
+    #[test]
+    fn curve_error_scales_every_alpha_up_and_every_beta_down() {
+        let paper = BenchParams::<f64>::paper();
+        let b = true_bench(5.0).unwrap();
+        let p = b.params();
+        for (a, a0) in p.alpha.iter().zip(&paper.alpha) {
+            assert_eq!(*a, a0 * 1.05);
+        }
+        for (x, x0) in p.beta.iter().zip(&paper.beta) {
+            assert_eq!(*x, x0 * 0.95);
+        }
+        assert_eq!(
+            (p.gamma, p.pipe_k1, p.valve_k2, p.static_head_c_mca),
+            (
+                paper.gamma,
+                paper.pipe_k1,
+                paper.valve_k2,
+                paper.static_head_c_mca
+            )
+        );
+        // Parameters the model refuses are a one-line message naming the option.
+        for pct in [f64::NAN, -100.0] {
+            let e = true_bench(pct).unwrap_err();
+            assert!(
+                e.starts_with("--curve-error ") && e.contains("refused"),
+                "{e}"
+            );
+            assert_eq!(e.lines().count(), 1);
+        }
+    }
+
+    #[test]
+    fn valve_steps_parse_and_bad_items_are_named() {
+        assert_eq!(
+            parse_valve_steps("20:1.3, 40 : 0.7,60:1").unwrap(),
+            [
+                ValveStep {
+                    t_s: 20.0,
+                    factor: 1.3
+                },
+                ValveStep {
+                    t_s: 40.0,
+                    factor: 0.7
+                },
+                ValveStep {
+                    t_s: 60.0,
+                    factor: 1.0
+                }
+            ]
+        );
+        assert_eq!(parse_valve_steps("-1:0.2,0:5").unwrap().len(), 2);
+        for (text, expected) in [
+            ("20:1.3,40:x", "item 2 '40:x': factor 'x' is not a number"),
+            ("20:0.19", "item 1 '20:0.19': factor 0.19 is outside 0.2..5"),
+            ("20:1,20:2", "item 2 '20:2': time 20 s is not after"),
+            ("inf:1", "item 1 'inf:1': time 'inf' is not a finite number"),
+            ("20:1,", "item 2 '': expected T:FACTOR"),
+            (" ", "no steps given"),
+        ] {
+            let e = parse_valve_steps(text).unwrap_err();
+            assert!(
+                e.starts_with("--valve-steps: ") && e.contains(expected),
+                "{e}"
+            );
+        }
     }
 
     #[test]

@@ -159,7 +159,7 @@ const SHOWN_CHARS: usize = 60;
 
 /// A cell or header as shown in a one-line message: control characters escaped, and cut after
 /// [`SHOWN_CHARS`] characters (`…` and the full length then follow).
-fn shown(text: &str) -> String {
+pub(crate) fn shown(text: &str) -> String {
     let n = text.chars().count();
     if n <= SHOWN_CHARS {
         return text.escape_debug().to_string();

@@ -259,6 +259,10 @@ enum Command {
     /// A SYNTHETIC bench record for a torque input: the white-box bench plus transmitter lags,
     /// noise and 12-bit quantisation. Demo data, not a measurement. CSV
     /// `t_s,torque_ref_pct,speed_rpm,flow_lps,pressure_mca`, one row per input row.
+    ///
+    /// The bench can differ from the paper's model (valve steps, curve error) to test an
+    /// observer against a known truth, which `--truth` writes beside the readings. Without
+    /// these options the record is the paper's bench, as always.
     BenchData {
         /// Input CSV `t_s,torque_ref_pct` (as for `simulate`).
         #[arg(long)]
@@ -269,6 +273,46 @@ enum Command {
         /// Output CSV (stdout if omitted).
         #[arg(long)]
         output: Option<PathBuf>,
+        /// Valve steps `T:FACTOR,...`, times increasing: from T (s, on the input's t_s) the
+        /// valve coefficient k2 is FACTOR (0.2..5) times the paper's 0.1082 √mca/(l/s), the
+        /// static head c unchanged; FACTOR > 1 closes the valve (less flow, more pressure).
+        /// Applied at the first 1 ms integration step at or after T (so from the first row
+        /// with t_s >= T); steps at or before the first row set the valve the bench starts
+        /// with. E.g. `20:1.3,40:0.7,60:1`.
+        #[arg(long, value_name = "T:FACTOR,...", allow_hyphen_values = true)]
+        valve_steps: Option<String>,
+        /// Curve error PCT, % (-20..20): the TRUE bench's pump-head curve F_H is the paper's
+        /// times (1 + PCT/100) (all ten alpha) and its load-torque curve F_T the paper's times
+        /// (1 - PCT/100) (all ten beta). PCT > 0: a stronger pump and a lighter load than the
+        /// paper's fits; PCT < 0: a weaker pump and a heavier load.
+        #[arg(
+            long,
+            value_name = "PCT",
+            default_value = "0",
+            allow_hyphen_values = true
+        )]
+        curve_error: String,
+        /// Add the columns speed_true (rpm), flow_true (l/s), pressure_true (mca) and k2_true
+        /// (√mca/(l/s)) after the readings: the bench's true state at the row's time, before
+        /// transmitter lag, noise and quantisation (shortest round-trip form).
+        #[arg(long)]
+        truth: bool,
+        /// First-order lag of the flow transmitter, ms (0..2000; 0: none).
+        #[arg(
+            long,
+            value_name = "MS",
+            default_value = "40",
+            allow_hyphen_values = true
+        )]
+        flow_lag_ms: String,
+        /// First-order lag of the pressure transmitter, ms (0..2000; 0: none).
+        #[arg(
+            long,
+            value_name = "MS",
+            default_value = "20",
+            allow_hyphen_values = true
+        )]
+        pressure_lag_ms: String,
     },
 }
 
@@ -491,14 +535,35 @@ fn run(cli: Cli) -> Result<(), Failure> {
             input,
             seed,
             output,
+            valve_steps,
+            curve_error,
+            truth,
+            flow_lag_ms,
+            pressure_lag_ms,
         } => {
+            // The options first (no file touched), then the output, then the input.
+            let options = benchdata::Options {
+                seed,
+                valve_steps: match valve_steps.as_deref() {
+                    Some(text) => benchdata::parse_valve_steps(text).map_err(Failure::usage)?,
+                    None => Vec::new(),
+                },
+                curve_error_pct: benchdata::parse_curve_error(&curve_error)
+                    .map_err(Failure::usage)?,
+                truth,
+                flow_lag_s: benchdata::parse_lag_ms("--flow-lag-ms", &flow_lag_ms)
+                    .map_err(Failure::usage)?,
+                pressure_lag_s: benchdata::parse_lag_ms("--pressure-lag-ms", &pressure_lag_ms)
+                    .map_err(Failure::usage)?,
+            };
+            benchdata::true_bench(options.curve_error_pct).map_err(Failure::usage)?;
             check_optional_output(&[("--input", &input)], output.as_deref())?;
             let data = input::read_input_to_integrate(
                 &input,
                 benchdata::STEP_MS,
                 benchdata::TOO_MANY_STEPS,
             )?;
-            output::write_csv(output.as_deref(), |w| benchdata::run(&data, seed, w))
+            output::write_csv(output.as_deref(), |w| benchdata::run(&data, &options, w))
         }
         Command::Study {
             train_pressure,

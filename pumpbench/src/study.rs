@@ -212,7 +212,7 @@ fn write_demo(dir: &Path) -> Result<(Files, String), Failure> {
         eprintln!("study: demo data {name} (excite seed {seed}, {seconds} s at {ts_ms} ms; bench-data seed {bench_seed})");
         let input = demo_excite(seed, seconds, ts_ms, 5.0, 85.0);
         output::write_csv(Some(&dir.join(name)), |w| {
-            benchdata::run(&input, bench_seed, w)
+            benchdata::run(&input, &benchdata::Options::with_seed(bench_seed), w)
         })?;
         let u = format!("u_{name}");
         let _ = writeln!(
@@ -230,7 +230,7 @@ fn write_demo(dir: &Path) -> Result<(Files, String), Failure> {
         let seed = DEMO_STATIC_SEED + u64::from(k);
         let input = demo_excite(1, DEMO_STATIC_SECONDS, DEMO_STATIC_TS_MS, torque, torque);
         let mut csv = Vec::new();
-        benchdata::run(&input, seed, &mut csv)?;
+        benchdata::run(&input, &benchdata::Options::with_seed(seed), &mut csv)?;
         let text = String::from_utf8(csv).map_err(|e| other(e.to_string()))?;
         let (mut p, mut q, mut n) = (0.0, 0.0, 0.0);
         for line in text.lines().skip(1) {
