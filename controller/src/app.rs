@@ -498,7 +498,9 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize> App<NP,
             if take_p {
                 let r = self.pressure_in.sample(io.pressure_code());
                 let good = r.status != InputStatus::Fault;
-                pressure_measured = good.then_some(r.value);
+                // The observer takes only readings inside 3.8..20.5 mA: a clamped one is a
+                // bound, not a measurement (at rest the outlet sits below the span's 0).
+                pressure_measured = (r.status == InputStatus::Ok).then_some(r.value);
                 let nx = self
                     .pressure
                     .step(self.arithmetic, u, good.then_some(r.value));
@@ -519,7 +521,7 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize> App<NP,
             if take_q {
                 let r = self.flow_in.sample(io.flow_code());
                 let good = r.status != InputStatus::Fault;
-                flow_measured = good.then_some(r.value);
+                flow_measured = (r.status == InputStatus::Ok).then_some(r.value);
                 let nx = self.flow.step(self.arithmetic, u, good.then_some(r.value));
                 self.nx_clamped[1] = nx.clamped;
                 o.flow_lps = r.value;

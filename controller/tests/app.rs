@@ -389,3 +389,19 @@ fn the_observer_follows_the_valve_and_the_alarms_follow_injected_faults() {
         run(&mut app, &mut io, 4000);
     }
 }
+/// From rest (the outlet below the pressure span: clamped readings are not fed to the
+/// observer) into the paper's pulses for a minute: no alarm on the healthy virtual bench.
+#[test]
+fn no_alarm_from_rest_through_a_minute_of_pulses() {
+    let (mut app, mut io) = setup(Mode::Stop, 0);
+    run(&mut app, &mut io, 5000);
+    assert_eq!(read_observer(&mut app).3, 0, "at rest");
+    let mut r = Response::new();
+    app.scada_frame(&with_crc(&[1, 6, 0, 1, 0, 2]), &mut r)
+        .unwrap();
+    for s in 0..60 {
+        run(&mut app, &mut io, 1000);
+        let alarms = read_observer(&mut app).3;
+        assert_eq!(alarms, 0, "alarm {alarms:#x} at {s} s of pulses");
+    }
+}

@@ -9,7 +9,7 @@
 //! | 3 | dry run / loss of prime | the load torque the motion shows (delivered torque − inertia × acceleration) is below `threshold` × what the paper's load curve needs at the speed and flow (measured when they are, else estimated), above `min_speed_rpm` | yes |
 //! | 4 | no flow / closed valve | estimated flow below `threshold` l/s above `min_speed_rpm`, or k2 above `closed_valve_k2_ratio` × its reference | no |
 //! | 5 | end of curve (run-out) | estimated or measured flow above `threshold` l/s (the fitted range ends at 27.8) | no |
-//! | 6 | load changed | k2 more than `threshold` (a fraction) from its reference | no (informational) |
+//! | 6 | load changed | k2 more than `threshold` (a fraction) from its reference, above `min_speed_rpm` (k2 is poorly observed with little flow) | no (informational) |
 //! | 7 | model residual | the innovations' normalised square (each capped at `residual_nis_cap`), averaged over `residual_tau_s`, above `threshold` | no |
 //!
 //! A latched alarm stays after its cause has gone until [`Monitor::acknowledge`]; an
@@ -77,7 +77,7 @@ pub struct MonitorConfig<T> {
     /// gate), so that the burst of a valve step (a few samples of thousands) does not raise
     /// the alarm, while a lasting inconsistency (a stuck transmitter) does.
     pub residual_nis_cap: T,
-    /// Speeds below this do not judge dry run or no flow, rpm: 500.
+    /// Speeds below this do not judge dry run, no flow or load changed, rpm: 500.
     pub min_speed_rpm: T,
     /// Reference k2 (the commissioned valve): the paper's 0.1082.
     pub k2_reference: T,
@@ -298,8 +298,8 @@ impl<T: Real> Monitor<T> {
         let change = (k2_ratio - T::ONE).abs();
         self.timers[6].update(
             dt,
-            change > l.threshold,
-            change < l.threshold - l.hysteresis,
+            spinning && change > l.threshold,
+            !spinning || change < l.threshold - l.hysteresis,
             l.raise_s,
             l.clear_s,
             l.latched,
