@@ -144,7 +144,9 @@ struct Timer<T> {
 }
 
 impl<T: Real> Timer<T> {
-    /// One update: `raise`/`clear` are the conditions (with the hysteresis applied).
+    /// One update: `raise`/`clear` are the conditions (with the hysteresis applied). Not
+    /// inlined: eight copies cost the MCU image ≈ 1 KB.
+    #[inline(never)]
     fn update(&mut self, dt: T, raise: bool, clear: bool, raise_s: T, clear_s: T, latched: bool) {
         let want = if self.active {
             clear && !latched

@@ -421,6 +421,7 @@ impl<T: Real> Observer<T> {
     }
 
     /// Flow at `x` (warm-started from the last solve).
+    #[inline(never)]
     fn flow(&mut self, x: &Vector<T>) -> T {
         let par = &self.cfg.params;
         let (w, k2, s_h) = (x[SPEED], x[K2], x[HEAD_SCALE]);
@@ -443,6 +444,7 @@ impl<T: Real> Observer<T> {
     }
 
     /// Flow at `x` with the partials the linearisation and the standard deviations need.
+    #[inline(never)]
     fn hydraulics(&mut self, x: &Vector<T>) -> Hydraulics<T> {
         let q = self.flow(x);
         let par = &self.cfg.params;
