@@ -37,7 +37,7 @@
 //! rpm: a transmitter at 2 mA, a NaN) is not used. An innovation whose normalised square
 //! exceeds [`ObserverConfig::gate_sigma`]² is rejected as an outlier, unless the channel has
 //! been rejected [`ObserverConfig::max_rejections`] times in a row: then the change is taken
-//! as real (the valve moved) and k2's variance is raised by [`ObserverConfig::k2_jump_sigma`]²
+//! as real (the valve moved) and, for pressure and flow, k2's variance is raised by [`ObserverConfig::k2_jump_sigma`]²
 //! before the update, so the filter re-converges in a few samples instead of tens of seconds.
 //! The covariance is kept symmetric, its diagonal positive; k2 and the scales stay within
 //! their configured ranges; a non-finite result restores the last good estimate. No output
@@ -68,7 +68,7 @@ pub const FLOW_LAGGED: usize = 5;
 pub const MAX_SUBSTEP_S: f64 = 0.025;
 /// Longest `dt` of one [`Observer::step`], s (the error message repeats it).
 pub const MAX_DT_S: f64 = 10.0;
-/// Water density × g, W per (l/s · m): hydraulic power P = 9.81 · Q[l/s] · H[m].
+/// Water density × g, W per (l/s · m): hydraulic power P = 9.81 · Q (l/s) · H (m).
 pub const RHO_G_W_PER_LPS_M: f64 = 9.806_65;
 
 /// Tuning of the observer. Noise densities are per second of the random walk (variance grows
@@ -655,9 +655,12 @@ impl<T: Real> Observer<T> {
                     nis,
                 };
             }
-            // A lasting change, not an outlier: let the valve move.
-            let j = self.cfg.k2_jump_sigma;
-            self.p[K2][K2] += j * j;
+            // A lasting change, not an outlier: let the valve move (pressure and flow only:
+            // a lasting speed offset says nothing about the valve).
+            if ch < 2 {
+                let j = self.cfg.k2_jump_sigma;
+                self.p[K2][K2] += j * j;
+            }
         }
         self.rejections[ch] = 0;
         let s = self.p[i][i] + r;
