@@ -172,6 +172,64 @@ pub(crate) fn shown(text: &str) -> String {
 /// columns ignored, no column name twice in the header) and parsing every cell of them as a
 /// finite number. Blank and whitespace-only lines are skipped.
 pub fn read_columns(path: &Path, names: &[&str]) -> Result<NumericColumns, InputError> {
+    let mut values = Vec::new();
+    let mut lines = Vec::new();
+    let columns = scan_csv(path, names, &[], |line, columns, record| {
+        for (c, name) in columns.iter().flatten().zip(names) {
+            values.push(finite_cell(
+                path,
+                line,
+                *c,
+                name,
+                record.get(*c).unwrap_or(""),
+            )?);
+        }
+        lines.push(line);
+        Ok(())
+    })?;
+    Ok(NumericColumns {
+        values,
+        width: names.len(),
+        lines,
+        columns: columns.iter().flatten().map(|c| c + 1).collect(),
+    })
+}
+
+/// The cell `text` of 0-based column `c` (named `name`) on `line`, as a finite number.
+fn finite_cell(
+    path: &Path,
+    line: u64,
+    c: usize,
+    name: &str,
+    text: &str,
+) -> Result<f64, InputError> {
+    let err = |message: String| InputError {
+        path: path.to_path_buf(),
+        line: Some(line),
+        column: Some((c + 1, name.to_string())),
+        message,
+    };
+    let value: f64 = text
+        .parse()
+        .map_err(|_| err(format!("'{}' is not a number", shown(text))))?;
+    if !value.is_finite() {
+        return Err(err(format!("'{}' is not a finite number", shown(text))));
+    }
+    Ok(value)
+}
+
+/// Reads `path` (at most [`MAX_CSV_BYTES`]): a header row that has every column of `names`
+/// and no column name twice, then data records of as many fields as the header (blank and
+/// whitespace-only lines skipped, at least one record). Cells are trimmed. `row` is called
+/// for each record with its 1-based line, the 0-based column of each of `names` then of each
+/// of `optional` (`None` where the header lacks an optional one), and the record. Returns
+/// those columns.
+fn scan_csv(
+    path: &Path,
+    names: &[&str],
+    optional: &[&str],
+    mut row: impl FnMut(u64, &[Option<usize>], &csv::StringRecord) -> Result<(), InputError>,
+) -> Result<Vec<Option<usize>>, InputError> {
     let err = |line: Option<u64>, column: Option<(usize, String)>, message: String| InputError {
         path: path.to_path_buf(),
         line,
@@ -217,10 +275,10 @@ pub fn read_columns(path: &Path, names: &[&str]) -> Result<NumericColumns, Input
         }
         first_of.insert(h, i);
     }
-    let mut columns = Vec::with_capacity(names.len());
+    let mut columns = Vec::with_capacity(names.len() + optional.len());
     for name in names {
-        match header.iter().position(|h| h == *name) {
-            Some(i) => columns.push(i),
+        match first_of.get(name) {
+            Some(&i) => columns.push(Some(i)),
             None => {
                 return Err(err(
                     Some(header_line),
@@ -233,8 +291,8 @@ pub fn read_columns(path: &Path, names: &[&str]) -> Result<NumericColumns, Input
             }
         }
     }
-    let mut values = Vec::new();
-    let mut lines = Vec::new();
+    columns.extend(optional.iter().map(|name| first_of.get(name).copied()));
+    let mut rows = 0u64;
     let mut record = csv::StringRecord::new();
     loop {
         match reader.read_record(&mut record) {
@@ -260,39 +318,17 @@ pub fn read_columns(path: &Path, names: &[&str]) -> Result<NumericColumns, Input
                 ),
             ));
         }
-        for (&c, name) in columns.iter().zip(names) {
-            let cell = record.get(c).unwrap_or("");
-            let value: f64 = cell.parse().map_err(|_| {
-                err(
-                    Some(line),
-                    Some((c + 1, name.to_string())),
-                    format!("'{}' is not a number", shown(cell)),
-                )
-            })?;
-            if !value.is_finite() {
-                return Err(err(
-                    Some(line),
-                    Some((c + 1, name.to_string())),
-                    format!("'{}' is not a finite number", shown(cell)),
-                ));
-            }
-            values.push(value);
-        }
-        lines.push(line);
+        row(line, &columns, &record)?;
+        rows += 1;
     }
-    if lines.is_empty() {
+    if rows == 0 {
         return Err(err(
             Some(header_line + 1),
             None,
             "no data rows after the header".into(),
         ));
     }
-    Ok(NumericColumns {
-        values,
-        width: names.len(),
-        lines,
-        columns: columns.iter().map(|c| c + 1).collect(),
-    })
+    Ok(columns)
 }
 
 fn csv_kind(e: &csv::Error) -> String {
@@ -323,14 +359,32 @@ fn read_torque(path: &Path) -> Result<(TorqueInput, Vec<u64>, usize), InputError
         t_s: Vec::with_capacity(data.len()),
         torque_ref_pct: Vec::with_capacity(data.len()),
     };
-    for (row, &line) in data.rows().zip(&data.lines) {
-        let (t, u) = (row[0], row[1]);
-        if let Some(&prev) = input.t_s.last() {
+    for row in data.rows() {
+        input.t_s.push(row[0]);
+        input.torque_ref_pct.push(row[1]);
+    }
+    check_time_and_torque(path, &input, &data.lines, data.columns[0], data.columns[1])?;
+    let t_column = data.columns[0];
+    Ok((input, data.lines, t_column))
+}
+
+/// The rule on a torque input's rows: times strictly increasing, torques within 0..=100 %.
+/// `lines` are the rows' lines, `t_column` and `u_column` the 1-based columns.
+fn check_time_and_torque(
+    path: &Path,
+    input: &TorqueInput,
+    lines: &[u64],
+    t_column: usize,
+    u_column: usize,
+) -> Result<(), InputError> {
+    for (k, (&t, &u)) in input.t_s.iter().zip(&input.torque_ref_pct).enumerate() {
+        if k > 0 {
+            let prev = input.t_s[k - 1];
             if t <= prev {
                 return Err(InputError {
                     path: path.to_path_buf(),
-                    line: Some(line),
-                    column: Some((data.columns[0], "t_s".into())),
+                    line: Some(lines[k]),
+                    column: Some((t_column, "t_s".into())),
                     message: format!(
                         "time {} s is not after the previous row's {} s",
                         Short(t),
@@ -342,16 +396,13 @@ fn read_torque(path: &Path) -> Result<(TorqueInput, Vec<u64>, usize), InputError
         if !(0.0..=100.0).contains(&u) {
             return Err(InputError {
                 path: path.to_path_buf(),
-                line: Some(line),
-                column: Some((data.columns[1], "torque_ref_pct".into())),
+                line: Some(lines[k]),
+                column: Some((u_column, "torque_ref_pct".into())),
                 message: format!("torque reference {} % is outside 0..100 %", Short(u)),
             });
         }
-        input.t_s.push(t);
-        input.torque_ref_pct.push(u);
     }
-    let t_column = data.columns[0];
-    Ok((input, data.lines, t_column))
+    Ok(())
 }
 
 /// Most integration steps one run of the white-box bench may take (`simulate`, `bench-data`,
@@ -621,14 +672,29 @@ pub fn read_series(path: &Path, y_column: &str, required: bool) -> Result<Series
         Err(e) => return Err(e),
     };
     let y = with_y.as_ref().map(|d| d.rows().map(|r| r[1]).collect());
+    let mean_step = check_uniform(path, &input.t_s, &lines)?;
+    Ok(Series {
+        t_s: input.t_s,
+        torque_ref_pct: input.torque_ref_pct,
+        y,
+        sample_period_s: mean_step,
+    })
+}
+
+/// The rule on a record's times for the commands that read a uniformly sampled record
+/// (`identify`, `validate`, `simulate --model narmax`, `study`, `observe`): every step within
+/// [`MAX_JITTER`] of the median step. `t_s` is strictly increasing, `lines` are the rows'
+/// lines. Returns the sample period: the mean step, span / (n − 1), equal to the median for
+/// accepted data (0 for one row).
+fn check_uniform(path: &Path, t_s: &[f64], lines: &[u64]) -> Result<f64, InputError> {
     // Gaps are judged against the median step (one gap or extra sample does not move it);
     // the period reported is the mean step, span / (n − 1), equal to it for accepted data.
-    let mut steps: Vec<f64> = input.t_s.windows(2).map(|p| p[1] - p[0]).collect();
+    let mut steps: Vec<f64> = t_s.windows(2).map(|p| p[1] - p[0]).collect();
     steps.sort_by(f64::total_cmp);
     let ts = steps.get(steps.len() / 2).copied().unwrap_or(0.0);
-    let n = input.t_s.len();
+    let n = t_s.len();
     let mean_step = if n > 1 {
-        (input.t_s[n - 1] - input.t_s[0]) / (n - 1) as f64
+        (t_s[n - 1] - t_s[0]) / (n - 1) as f64
     } else {
         0.0
     };
@@ -638,7 +704,7 @@ pub fn read_series(path: &Path, y_column: &str, required: bool) -> Result<Series
         column: None,
         message,
     };
-    for (pair, &line) in input.t_s.windows(2).zip(&lines[1..]) {
+    for (pair, &line) in t_s.windows(2).zip(&lines[1..]) {
         let d = pair[1] - pair[0];
         if !((d - ts).abs() <= MAX_JITTER * ts) {
             return Err(bad(
@@ -656,15 +722,179 @@ pub fn read_series(path: &Path, y_column: &str, required: bool) -> Result<Series
             lines[n - 1],
             format!(
                 "the times span {} s to {} s: more than an f64 holds",
-                Short(input.t_s[0]),
-                Short(input.t_s[n - 1])
+                Short(t_s[0]),
+                Short(t_s[n - 1])
             ),
         ));
     }
-    Ok(Series {
-        t_s: input.t_s,
-        torque_ref_pct: input.torque_ref_pct,
-        y,
-        sample_period_s: mean_step,
+    Ok(mean_step)
+}
+
+/// A uniformly sampled record whose other cells may be empty: `observe`'s input.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GappyRecord {
+    /// Times, s (strictly increasing, uniformly sampled) and torque references, % (0..=100):
+    /// in every row.
+    pub input: TorqueInput,
+    /// The columns asked for besides those two, in the order asked: `None` for an optional
+    /// column the header lacks, else each row's cell (`None` where it is empty).
+    pub columns: Vec<Option<Vec<Option<f64>>>>,
+    /// 1-based line of each row.
+    pub lines: Vec<u64>,
+    /// 1-based column of `t_s`.
+    pub t_column: usize,
+    /// Sample period (mean step), s.
+    pub sample_period_s: f64,
+}
+
+/// Reads a uniformly sampled record (the rule of [`read_series`]) with `t_s` and
+/// `torque_ref_pct` in every row, as [`read_torque`] checks them, and the columns `names`
+/// (required in the header) and `optional` (read if the header has them), whose cells may be
+/// empty (a missing value). A non-empty cell must parse as a number; `NaN`, `inf` and numbers
+/// beyond f64 (`1e999`) are kept as NaN or ±inf, for the caller to judge.
+pub fn read_gappy_series(
+    path: &Path,
+    names: &[&str],
+    optional: &[&str],
+) -> Result<GappyRecord, InputError> {
+    let mut required = vec!["t_s", "torque_ref_pct"];
+    required.extend_from_slice(names);
+    let all: Vec<&str> = required.iter().chain(optional).copied().collect();
+    let mut input = TorqueInput {
+        t_s: Vec::new(),
+        torque_ref_pct: Vec::new(),
+    };
+    let mut cells: Vec<Vec<Option<f64>>> = vec![Vec::new(); all.len() - 2];
+    let mut lines = Vec::new();
+    let columns = scan_csv(path, &required, optional, |line, columns, record| {
+        let err = |c: usize, name: &str, message: String| InputError {
+            path: path.to_path_buf(),
+            line: Some(line),
+            column: Some((c + 1, name.to_string())),
+            message,
+        };
+        for (k, (column, name)) in columns.iter().zip(&all).enumerate() {
+            let Some(c) = *column else { continue };
+            let text = record.get(c).unwrap_or("");
+            if k < 2 {
+                if text.is_empty() {
+                    return Err(err(
+                        c,
+                        name,
+                        format!("empty cell: {name} is needed on every row"),
+                    ));
+                }
+                let v = finite_cell(path, line, c, name, text)?;
+                [&mut input.t_s, &mut input.torque_ref_pct][k].push(v);
+            } else if text.is_empty() {
+                cells[k - 2].push(None);
+            } else {
+                let v: f64 = text.parse().map_err(|_| {
+                    err(
+                        c,
+                        name,
+                        format!(
+                            "'{}' is not a number (an empty cell is a missing value)",
+                            shown(text)
+                        ),
+                    )
+                })?;
+                cells[k - 2].push(Some(v));
+            }
+        }
+        lines.push(line);
+        Ok(())
+    })?;
+    let (t_column, u_column) = match columns[..2] {
+        [Some(t), Some(u)] => (t + 1, u + 1),
+        _ => unreachable!("required columns are found or refused"),
+    };
+    check_time_and_torque(path, &input, &lines, t_column, u_column)?;
+    let sample_period_s = check_uniform(path, &input.t_s, &lines)?;
+    let columns = columns[2..]
+        .iter()
+        .zip(cells)
+        .map(|(c, v)| c.map(|_| v))
+        .collect();
+    Ok(GappyRecord {
+        input,
+        columns,
+        lines,
+        t_column,
+        sample_period_s,
     })
+}
+
+#[cfg(test)]
+mod gappy_tests {
+    use super::*;
+    use std::io::Write;
+
+    fn read(text: &str) -> Result<GappyRecord, String> {
+        let mut f = tempfile::NamedTempFile::new().unwrap();
+        f.write_all(text.as_bytes()).unwrap();
+        read_gappy_series(f.path(), &["p"], &["q", "absent"])
+            .map_err(|e| e.to_string().replace(&f.path().display().to_string(), "F"))
+    }
+
+    #[test]
+    fn empty_cells_are_missing_and_non_finite_text_is_kept() {
+        let r = read("q,t_s,p,torque_ref_pct\n1,0,,10\n,0.05,NaN,20\n1e999,0.1,-inf,30\n").unwrap();
+        assert_eq!(r.input.t_s, [0.0, 0.05, 0.1]);
+        assert_eq!(r.input.torque_ref_pct, [10.0, 20.0, 30.0]);
+        assert_eq!(r.lines, [2, 3, 4]);
+        assert_eq!(r.t_column, 2);
+        assert!((r.sample_period_s - 0.05).abs() < 1e-12);
+        let p = r.columns[0].as_ref().unwrap();
+        assert!(p[0].is_none() && p[1].is_some_and(f64::is_nan) && p[2] == Some(f64::NEG_INFINITY));
+        assert_eq!(
+            r.columns[1],
+            Some(vec![Some(1.0), None, Some(f64::INFINITY)])
+        );
+        assert_eq!(r.columns[2], None);
+    }
+
+    #[test]
+    fn the_times_and_torques_follow_the_series_rules() {
+        for (text, expected) in [
+            (
+                "t_s,torque_ref_pct,p\n0,10,1\n,10,1\n",
+                "F:3:1 (t_s): empty cell: t_s is needed on every row",
+            ),
+            (
+                "t_s,torque_ref_pct,p\n0,10,1\n0.05,x,1\n",
+                "F:3:2 (torque_ref_pct): 'x' is not a number",
+            ),
+            (
+                "t_s,torque_ref_pct,p\n0,10,1\n0.05,10,x\n",
+                "F:3:3 (p): 'x' is not a number (an empty cell is a missing value)",
+            ),
+            (
+                "t_s,torque_ref_pct,p\n0,10,1\n0.05,101,1\n",
+                "F:3:2 (torque_ref_pct): torque reference 101 % is outside 0..100 %",
+            ),
+            (
+                "t_s,torque_ref_pct,p\n0,10,1\n0,10,1\n",
+                "F:3:1 (t_s): time 0 s is not after the previous row's 0 s",
+            ),
+            (
+                "t_s,torque_ref_pct,p\n0,10,1\n1,10,1\n1.5,10,1\n",
+                "F:4: not uniformly sampled: step 0.5 s where the median step is 1 s",
+            ),
+            (
+                "t_s,torque_ref_pct\n0,10\n",
+                "F:1: missing column 'p' (header is 't_s,torque_ref_pct')",
+            ),
+            (
+                "t_s,torque_ref_pct,p,q,q\n0,10,1,1,1\n",
+                "F:1:5 (q): column 'q' appears twice in the header (columns 4 and 5)",
+            ),
+            (
+                "t_s,torque_ref_pct,p\n",
+                "F:2: no data rows after the header",
+            ),
+        ] {
+            assert_eq!(read(text).unwrap_err(), expected, "{text}");
+        }
+    }
 }

@@ -15,6 +15,7 @@ mod input;
 mod modelfile;
 mod narmaxcmd;
 mod num;
+mod observe;
 mod output;
 mod plots;
 mod simulate;
@@ -217,6 +218,47 @@ enum Command {
         /// Arithmetic.
         #[arg(long, value_enum, default_value = "f64")]
         precision: Precision,
+    },
+    /// Run the observer (an extended Kalman filter on the white-box bench) and the alarm
+    /// monitor over a record, as the controller runs them; one output row per input row.
+    ///
+    /// The record (uniformly sampled, as for `identify`) has t_s (s) and torque_ref_pct (%,
+    /// 0..100) in every row, the column pressure_mca (mca) and optionally flow_lps (l/s) and
+    /// speed_rpm (rpm, the VFD's); other columns are ignored, except k2_true, flow_true,
+    /// speed_true and pressure_true, which are plotted. An empty measurement cell is a
+    /// missing measurement; NaN or inf (or 1e999) in one is passed on and refused by the
+    /// observer as implausible, which raises that transmitter's fault bit.
+    ///
+    /// The observer starts at the steady state of row 0's torque and takes row 0 as a step of
+    /// one sample period; row k is a step from t(k-1) to t(k) with the torque of row k-1 held
+    /// (as in `simulate`), then row k's measurements. Each output row is the estimate after
+    /// that row's measurements (standard deviations 1 sigma; innovations and their normalised
+    /// squares 0 when the measurement is missing or implausible):
+    ///
+    /// t_s (s, echoed), speed_rpm (rpm), flow_lps (l/s), pressure_mca (mca, outlet pressure
+    /// without the transmitter's lag), valve_k2 (mca^0.5 s/l), head_scale (1: the paper's
+    /// pump-head curve), speed_sd_rpm (rpm), flow_sd_lps (l/s), pressure_sd_mca (mca),
+    /// valve_k2_sd (mca^0.5 s/l), head_scale_sd (1), torque_scale (1: the paper's load-torque
+    /// curve), torque_scale_sd (1), pump_head_mca (mca), pipe_loss_mca (mca),
+    /// hydraulic_power_w (W), pressure_innovation_mca (mca, measured - predicted),
+    /// pressure_nis (1), flow_innovation_lps (l/s), flow_nis (1), speed_innovation_rpm (rpm),
+    /// speed_nis (1), alarm_bits (integer: 1 pressure transmitter, 2 flow transmitter, 4 VFD
+    /// link, 8 dry run, 16 no flow, 32 end of curve, 64 load changed, 128 model residual).
+    ///
+    /// With --output OUT.csv, a figure OUT.png beside it: speed, flow, pressure and k2
+    /// estimated against the measurements and the truth columns, alarms shaded.
+    Observe {
+        /// The record (CSV).
+        #[arg(long)]
+        data: PathBuf,
+        /// Arithmetic of the observer and the monitor (f32: the MCU's).
+        #[arg(long, value_enum, default_value = "f64")]
+        precision: observe::Precision,
+        /// Output CSV (stdout if omitted, and no figure). Written to a temporary file and
+        /// renamed when complete, as is the figure OUT.png (same stem; none when the output
+        /// is a device such as /dev/null).
+        #[arg(long)]
+        output: Option<PathBuf>,
     },
     /// A model file as Rust source for the firmware (f32 constants and a `model()`
     /// constructor); e.g. `--output firmware/src/models/pressure.rs`, then build the firmware.
@@ -462,6 +504,11 @@ fn run(cli: Cli) -> Result<(), Failure> {
             }
             Ok(())
         }
+        Command::Observe {
+            data,
+            precision,
+            output,
+        } => observe::command(&data, precision, output.as_deref()),
         Command::Excite {
             seed,
             seconds,

@@ -293,3 +293,128 @@ pub fn figures(dir: &Path, p: &TargetResult, q: &TargetResult) -> Result<(), Fai
     .map_err(|e| fail(name, e))?;
     Ok(())
 }
+
+/// One panel of `observe`'s figure: the estimate, and the measurement and the truth when the
+/// record has them (`None` in a series: no value at that point).
+pub struct ObservePanel<'a> {
+    /// Panel title.
+    pub title: &'a str,
+    /// Y axis, with its unit.
+    pub y_desc: &'a str,
+    /// The observer's estimate.
+    pub estimate: &'a [f64],
+    /// The measurement.
+    pub measured: Option<&'a [Option<f64>]>,
+    /// The truth.
+    pub truth: Option<&'a [Option<f64>]>,
+}
+
+const TRUTH: RGBColor = RGBColor(31, 119, 180);
+const ALARM: RGBColor = RGBColor(255, 170, 0);
+
+/// The runs of consecutive finite values of `y` (as points at `t`).
+fn runs(t: &[f64], y: &[Option<f64>]) -> Vec<Vec<(f64, f64)>> {
+    let mut out: Vec<Vec<(f64, f64)>> = vec![];
+    let mut open = false;
+    for (&t, v) in t.iter().zip(y) {
+        match v {
+            Some(v) if v.is_finite() => {
+                if !open {
+                    out.push(vec![]);
+                    open = true;
+                }
+                if let Some(run) = out.last_mut() {
+                    run.push((t, *v));
+                }
+            }
+            _ => open = false,
+        }
+    }
+    out
+}
+
+/// One panel: alarms shaded, then the measurement, the truth and the estimate.
+fn observe_panel(area: &Area, t: &[f64], p: &ObservePanel, alarms: &[(f64, f64)]) -> Drawn {
+    let measured = p.measured.map(|m| runs(t, m)).unwrap_or_default();
+    let truth = p.truth.map(|m| runs(t, m)).unwrap_or_default();
+    let (y0, y1) = span(
+        p.estimate
+            .iter()
+            .chain(measured.iter().flatten().map(|q| &q.1))
+            .chain(truth.iter().flatten().map(|q| &q.1)),
+    );
+    let (x0, x1) = (t[0], t[t.len() - 1].max(t[0] + 1e-9));
+    let mut chart = ChartBuilder::on(area)
+        .caption(p.title, (FONT, 20))
+        .margin(10)
+        .x_label_area_size(40)
+        .y_label_area_size(70)
+        .build_cartesian_2d(x0..x1, y0..y1)?;
+    chart
+        .configure_mesh()
+        .x_desc("time (s)")
+        .x_label_formatter(&|x| format!("{x:.0}"))
+        .y_desc(p.y_desc)
+        .label_style((FONT, 15))
+        .axis_desc_style((FONT, 16))
+        .light_line_style(RGBColor(235, 235, 235))
+        .draw()?;
+    let shade = ALARM.mix(0.25).filled();
+    let drawn = chart.draw_series(
+        alarms
+            .iter()
+            .map(|&(a, b)| Rectangle::new([(a, y0), (b.max(a), y1)], shade)),
+    )?;
+    if !alarms.is_empty() {
+        drawn.label("alarm (any bit)").legend(move |(x, y)| {
+            Rectangle::new([(x, y - 6), (x + 20, y + 6)], ALARM.mix(0.4).filled())
+        });
+    }
+    let mut lines = |runs: Vec<Vec<(f64, f64)>>, style: ShapeStyle, label: &str| -> Drawn {
+        for (i, run) in runs.into_iter().enumerate() {
+            let s = chart.draw_series(LineSeries::new(run, style))?;
+            if i == 0 {
+                s.label(label).legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 20, y)], style.stroke_width(2))
+                });
+            }
+        }
+        Ok(())
+    };
+    lines(measured, MEASURED.mix(0.6).stroke_width(1), "measurement")?;
+    lines(truth, TRUTH.stroke_width(2), "truth")?;
+    let estimate: Vec<Option<f64>> = p.estimate.iter().map(|&v| Some(v)).collect();
+    lines(runs(t, &estimate), MODEL.stroke_width(1), "estimate")?;
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperRight)
+        .label_font((FONT, 15))
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .draw()?;
+    Ok(())
+}
+
+/// `observe`'s figure (PNG at `path`, which must end in `.png`): the panels stacked over the
+/// times `t`, alarms (from, to) shaded. The error is a one-line message without the path.
+pub fn observe_figure(
+    path: &Path,
+    title: &str,
+    t: &[f64],
+    panels: &[ObservePanel],
+    alarms: &[(f64, f64)],
+) -> Result<(), String> {
+    font().map_err(|f| f.message)?;
+    let draw = || -> Drawn {
+        let root =
+            BitMapBackend::new(path, (1600, 300 * panels.len() as u32 + 60)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let root = root.titled(title, (FONT, 24))?;
+        for (area, p) in root.split_evenly((panels.len(), 1)).iter().zip(panels) {
+            observe_panel(area, t, p, alarms)?;
+        }
+        root.present()?;
+        Ok(())
+    };
+    draw().map_err(|e| e.to_string())
+}
