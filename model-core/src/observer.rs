@@ -81,6 +81,11 @@ pub struct ObserverConfig<T> {
     pub pressure_lag_s: T,
     /// Flow transmitter's first-order lag, s (≥ 0).
     pub flow_lag_s: T,
+    /// How far the pressure transmitter's lag may be from `pressure_lag_s`, s (1 σ): while
+    /// pressure moves at r mca/s its reading's variance grows by (this · r)².
+    pub pressure_lag_sd_s: T,
+    /// How far the flow transmitter's lag may be from `flow_lag_s`, s (1 σ), likewise.
+    pub flow_lag_sd_s: T,
     /// Process noise of speed, rpm²/s (model error of the torque balance).
     pub speed_psd: T,
     /// Random walk of k2, (mca^½·s/l)²/s.
@@ -120,7 +125,9 @@ impl<T: Real> ObserverConfig<T> {
         Self {
             params: BenchParams::paper(),
             pressure_lag_s: f(0.020),
-            flow_lag_s: f(0.040),
+            flow_lag_s: f(0.080),
+            pressure_lag_sd_s: f(0.040),
+            flow_lag_sd_s: f(0.070),
             speed_psd: f(400.0),
             k2_psd: f(1e-6),
             head_scale_psd: f(1e-5),
@@ -147,6 +154,8 @@ impl<T: Real> ObserverConfig<T> {
         let pos = |x: T| x.is_finite() && x > T::ZERO;
         let ok = nonneg(self.pressure_lag_s)
             && nonneg(self.flow_lag_s)
+            && nonneg(self.pressure_lag_sd_s)
+            && nonneg(self.flow_lag_sd_s)
             && nonneg(self.speed_psd)
             && nonneg(self.k2_psd)
             && nonneg(self.head_scale_psd)
@@ -327,6 +336,9 @@ pub struct Observer<T> {
     flow_warm: T,
     rejections: [u8; 3],
     step_consts: StepConsts<T>,
+    /// Outlet pressure and flow at the end of the last prediction (what the lagged readings
+    /// move toward).
+    predicted: (T, T),
     /// Set by every reset; `Option` only to build the observer before its first estimate.
     last: Option<Estimate<T>>,
 }
@@ -357,6 +369,7 @@ impl<T: Real> Observer<T> {
             flow_warm: T::ZERO,
             rejections: [0; 3],
             step_consts: StepConsts::new(&config, T::from_f64(0.05)),
+            predicted: (T::ZERO, T::ZERO),
             last: None,
         };
         o.reset(torque_ref_pct);
@@ -395,6 +408,7 @@ impl<T: Real> Observer<T> {
         let h = self.hydraulics(&x);
         x[PRESSURE_LAGGED] = self.outlet_pressure(&x, h.flow);
         x[FLOW_LAGGED] = h.flow;
+        self.predicted = (x[PRESSURE_LAGGED], h.flow);
         self.x = x;
         self.p = [[T::ZERO; STATES]; STATES];
         for (i, s) in self.cfg.initial_sigma.iter().enumerate() {
@@ -572,6 +586,7 @@ impl<T: Real> Observer<T> {
             self.x[FLOW_LAGGED] = k.lag_q.advance(self.x[FLOW_LAGGED], q_start, q_end);
             (hs_start, q_start) = (hs_end, q_end);
         }
+        self.predicted = (hs_start, q_start);
 
         // P = Φ P Φᵀ + Q, with rows K2, HEAD_SCALE, TORQUE_SCALE of Φ the identity.
         let p = self.p;
@@ -611,22 +626,41 @@ impl<T: Real> Observer<T> {
         self.symmetrize();
     }
 
+    /// A transmitter's noise variance plus what its uncertain lag adds while the signal
+    /// moves: a lag off by `lag_sd` misreads a signal changing at `rate` by ≈ `lag_sd · rate`.
+    fn lag_variance(sigma: T, lag_sd: T, target: T, lagged: T, lag: T) -> T {
+        let rate = if lag > T::ZERO {
+            (target - lagged) / lag
+        } else {
+            T::ZERO
+        };
+        let e = lag_sd * rate;
+        sigma * sigma + e * e
+    }
+
     fn update_pressure(&mut self, y: Option<T>) -> Innovation<T> {
-        let lo = -self.cfg.params.static_head_c_mca - T::from_f64(0.5);
-        let r = self.cfg.pressure_sigma_mca;
-        self.update(0, PRESSURE_LAGGED, y, lo, T::from_f64(60.0), r * r)
+        let c = &self.cfg;
+        let lo = -c.params.static_head_c_mca - T::from_f64(0.5);
+        let r = Self::lag_variance(
+            c.pressure_sigma_mca,
+            c.pressure_lag_sd_s,
+            self.predicted.0,
+            self.x[PRESSURE_LAGGED],
+            c.pressure_lag_s,
+        );
+        self.update(0, PRESSURE_LAGGED, y, lo, T::from_f64(60.0), r)
     }
 
     fn update_flow(&mut self, y: Option<T>) -> Innovation<T> {
-        let r = self.cfg.flow_sigma_lps;
-        self.update(
-            1,
-            FLOW_LAGGED,
-            y,
-            T::from_f64(-0.5),
-            T::from_f64(60.0),
-            r * r,
-        )
+        let c = &self.cfg;
+        let r = Self::lag_variance(
+            c.flow_sigma_lps,
+            c.flow_lag_sd_s,
+            self.predicted.1,
+            self.x[FLOW_LAGGED],
+            c.flow_lag_s,
+        );
+        self.update(1, FLOW_LAGGED, y, T::from_f64(-0.5), T::from_f64(60.0), r)
     }
 
     fn update_speed(&mut self, y: Option<T>) -> Innovation<T> {
