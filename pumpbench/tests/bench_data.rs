@@ -2,21 +2,8 @@
 //! curve error, set transmitter lags, and the true state beside the readings (`--truth`).
 //! Without these options the record is what it was before they existed.
 
-use std::path::Path;
-use std::process::{Command, Output};
-
-fn pumpbench(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_pumpbench"))
-        .args(args)
-        .output()
-        .expect("run pumpbench")
-}
-
-fn write(dir: &Path, name: &str, text: &str) -> String {
-    let p = dir.join(name);
-    std::fs::write(&p, text).unwrap();
-    p.display().to_string()
-}
+mod common;
+use common::{pumpbench, write};
 
 /// Runs `bench-data` and returns its stdout, which must be a success.
 fn bench_data(args: &[&str]) -> String {

@@ -1,22 +1,9 @@
 //! The `pumpbench` command line: contract, errors, and results against the reference.
 
+mod common;
+use common::{pumpbench, write};
 use host_tests::reference::Reference;
 use host_tests::stats::ErrorStats;
-use std::path::Path;
-use std::process::{Command, Output};
-
-fn pumpbench(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_pumpbench"))
-        .args(args)
-        .output()
-        .expect("run pumpbench")
-}
-
-fn write(dir: &Path, name: &str, text: &str) -> String {
-    let p = dir.join(name);
-    std::fs::write(&p, text).unwrap();
-    p.display().to_string()
-}
 
 fn parse_csv(text: &str) -> (Vec<String>, Vec<Vec<f64>>) {
     let mut lines = text.lines();

@@ -4,38 +4,9 @@
 //! before any output (or accepted, for sub-microsecond steps), and numbers are printed in
 //! their shortest round-trip form.
 
+mod common;
+use common::{pumpbench, pumpbench_in, refused, write};
 use std::path::Path;
-use std::process::{Command, Output};
-
-fn pumpbench_in(dir: Option<&Path>, args: &[&str]) -> Output {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_pumpbench"));
-    if let Some(d) = dir {
-        c.current_dir(d);
-    }
-    c.args(args).output().expect("run pumpbench")
-}
-
-fn pumpbench(args: &[&str]) -> Output {
-    pumpbench_in(None, args)
-}
-
-fn write(dir: &Path, name: &str, text: &str) -> String {
-    let p = dir.join(name);
-    std::fs::write(&p, text).unwrap();
-    p.display().to_string()
-}
-
-/// Exit code 2, nothing on stdout, one line on stderr containing every `expected`; returns it.
-fn refused(out: &Output, expected: &[&str], what: &str) -> String {
-    let err = String::from_utf8_lossy(&out.stderr).into_owned();
-    assert_eq!(out.status.code(), Some(2), "{what}: {err}");
-    assert_eq!(err.lines().count(), 1, "{what}: one line: {err}");
-    assert!(out.stdout.is_empty(), "{what}: no output on stdout");
-    for e in expected {
-        assert!(err.contains(e), "{what}: expected '{e}' in: {err}");
-    }
-    err
-}
 
 /// A uniformly sampled (50 ms) record `t_s,torque_ref_pct,pressure_mca` of `n` rows.
 fn record(n: usize) -> String {

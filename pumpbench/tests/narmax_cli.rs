@@ -1,17 +1,12 @@
 //! `identify`, narmax `simulate`/`steady`, `validate`: recovery of a known NARX, precisions,
 //! and one-line errors for bad or mismatched files.
 
+mod common;
+use common::pumpbench;
 use host_tests::narmax_ref::RefNarmax;
 use model_core::excitation::SplitMix64;
 use std::path::Path;
-use std::process::{Command, Output};
-
-fn pumpbench(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_pumpbench"))
-        .args(args)
-        .output()
-        .expect("run pumpbench")
-}
+use std::process::Output;
 
 fn stdout(o: &Output) -> String {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));

@@ -8,17 +8,12 @@
 //! logger rounding), the truth beside them. Figures: `cargo test -p pumpbench --test observe
 //! -- --nocapture`.
 
+mod common;
+use common::{pumpbench, refused, write};
 use model_core::excitation::SplitMix64;
 use model_core::{BenchParams, Scheme, WhiteBox};
 use std::path::Path;
-use std::process::{Command, Output};
-
-fn pumpbench(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_pumpbench"))
-        .args(args)
-        .output()
-        .expect("run pumpbench")
-}
+use std::process::Output;
 
 fn ok(out: &Output, what: &str) -> String {
     assert!(
@@ -27,23 +22,6 @@ fn ok(out: &Output, what: &str) -> String {
         String::from_utf8_lossy(&out.stderr)
     );
     String::from_utf8(out.stdout.clone()).unwrap()
-}
-
-fn write(dir: &Path, name: &str, text: &str) -> String {
-    let p = dir.join(name);
-    std::fs::write(&p, text).unwrap();
-    p.display().to_string()
-}
-
-/// Exit code 2, nothing on stdout, one line on stderr containing every `expected`.
-fn refused(out: &Output, expected: &[&str], what: &str) {
-    let err = String::from_utf8_lossy(&out.stderr).into_owned();
-    assert_eq!(out.status.code(), Some(2), "{what}: {err}");
-    assert_eq!(err.lines().count(), 1, "{what}: one line: {err}");
-    assert!(out.stdout.is_empty(), "{what}: no output on stdout");
-    for e in expected {
-        assert!(err.contains(e), "{what}: expected '{e}' in: {err}");
-    }
 }
 
 /// `observe`'s output: its header and rows.

@@ -1,14 +1,8 @@
 //! `pumpbench study`: the demo run end to end (data, models, Table 1, figures) and its errors.
 
+mod common;
+use common::pumpbench;
 use std::path::Path;
-use std::process::{Command, Output};
-
-fn pumpbench(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_pumpbench"))
-        .args(args)
-        .output()
-        .expect("run pumpbench")
-}
 
 /// The four MAPE cells of a Table 1 row, the pressure static one split into all / without the
 /// lowest-torque point: `[p_static, p_static_without_lowest, p_dynamic, q_static, q_dynamic]`.
