@@ -198,18 +198,43 @@ pub fn write_fixed(out: &mut impl core::fmt::Write, x: f32, decimals: u32) -> co
     if !x.is_finite() {
         return out.write_str("nan");
     }
-    let scale = 10i64.pow(decimals.min(6));
-    let scaled = (x as f64 * scale as f64 + if x < 0.0 { -0.5 } else { 0.5 }) as i64;
-    let sign = if scaled < 0 { "-" } else { "" };
-    let a = scaled.unsigned_abs();
-    let s = scale as u64;
-    write!(
-        out,
-        "{sign}{}.{:0w$}",
-        a / s,
-        a % s,
-        w = decimals.min(6) as usize
-    )
+    // f32 and u32 only: f64 and u64 arithmetic are software routines on the M4 (≈ 1 KB of
+    // flash for u64 division alone). Values whose scaled magnitude passes u32 print `ovf`.
+    let d = decimals.min(6);
+    let scale = 10u32.pow(d);
+    let v = x.abs() * scale as f32 + 0.5;
+    if !(v < 4.294_967e9) {
+        return out.write_str("ovf");
+    }
+    let a = v as u32;
+    if x < 0.0 && a != 0 {
+        out.write_char('-')?;
+    }
+    write!(out, "{}.{:0w$}", a / scale, a % scale, w = d as usize)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::write_fixed;
+
+    fn fixed(x: f32, d: u32) -> String {
+        let mut s = String::new();
+        write_fixed(&mut s, x, d).unwrap();
+        s
+    }
+
+    #[test]
+    fn fixed_point_text() {
+        assert_eq!(fixed(1233.94, 1), "1233.9");
+        assert_eq!(fixed(2.7106, 3), "2.711");
+        assert_eq!(fixed(-0.0125, 3), "-0.013");
+        assert_eq!(fixed(-0.0004, 3), "0.000", "no sign on a rounded zero");
+        assert_eq!(fixed(0.11052, 5), "0.11052");
+        assert_eq!(fixed(50.0, 2), "50.00");
+        assert_eq!(fixed(f32::NAN, 2), "nan");
+        assert_eq!(fixed(1e9, 3), "ovf");
+        assert_eq!(fixed(-1e9, 3), "ovf");
+    }
 }
 
 impl LogLine {
@@ -290,6 +315,8 @@ pub struct App<const NP: usize, const HP: usize, const NF: usize, const HF: usiz
     torque_ticks: u32,
     /// [`VfdMaster::reads_ok`] at the last observer step.
     vfd_reads_seen: u32,
+    /// [`ScadaSlave::stop_writes`] last acknowledged.
+    stop_writes_seen: u16,
     virtual_bench: bool,
     out: Published,
     tx: Frame,
@@ -341,6 +368,7 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize> App<NP,
             torque_sum: 0.0,
             torque_ticks: 0,
             vfd_reads_seen: 0,
+            stop_writes_seen: 0,
             virtual_bench: config.virtual_bench,
             out: Published::default(),
             tx: Frame::new(),
@@ -426,7 +454,7 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize> App<NP,
             .observer
             .step(dt, torque, &m)
             .unwrap_or_else(|_| self.observer.estimate_now());
-        let alarms = self.monitor.update(&MonitorInputs {
+        self.monitor.update(&MonitorInputs {
             dt_s: dt,
             estimate: e,
             torque_ref_pct: torque,
@@ -437,6 +465,12 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize> App<NP,
             flow_fault: self.flow_in.faulted(),
             vfd_link_alarm: self.vfd.alarm(),
         });
+        if self.scada.stop_writes != self.stop_writes_seen {
+            // SCADA wrote "stop": the operator's reset of latched alarms whose cause is gone.
+            self.stop_writes_seen = self.scada.stop_writes;
+            self.monitor.acknowledge();
+        }
+        let alarms = self.monitor.bits();
         let o = &mut self.out;
         o.observer_speed_rpm = e.speed_rpm;
         o.observer_flow_lps = e.flow_lps;
@@ -498,8 +532,9 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize> App<NP,
             if take_p {
                 let r = self.pressure_in.sample(io.pressure_code());
                 let good = r.status != InputStatus::Fault;
-                // The observer takes only readings inside 3.8..20.5 mA: a clamped one is a
-                // bound, not a measurement (at rest the outlet sits below the span's 0).
+                // The observer takes only readings inside the span (4..20 mA): outside it the
+                // value is clamped, a bound rather than a measurement (at rest the outlet
+                // sits below the span's 0).
                 pressure_measured = (r.status == InputStatus::Ok).then_some(r.value);
                 let nx = self
                     .pressure

@@ -29,7 +29,7 @@
 //! | holding register (FC 03, 06, 16) | meaning | range |
 //! |---|---|---|
 //! | 0 | torque setpoint, 0.01 % | 0..=10000 |
-//! | 1 | mode: 0 stop, 1 manual setpoint, 2 built-in excitation profile | 0..=2 |
+//! | 1 | mode: 0 stop, 1 manual setpoint, 2 built-in excitation profile; writing 0 also acknowledges the latched alarms whose cause has gone | 0..=2 |
 //! | 2 | NARMAX arithmetic: 0 f32, 1 fixed point | 0..=1 |
 //! | 3 | virtual bench only: its valve, k2 in 0.1 % of nominal (1000 = nominal) | 500..=2000 |
 //! | 4 | virtual bench only: fault injection bits: 0 dry run, 1 pressure transmitter at 2 mA, 2 flow transmitter at 2 mA, 3 VFD link cut | 0..=15 |
@@ -333,6 +333,9 @@ pub fn request_at_end(bytes: &[u8]) -> Option<usize> {
     if growing {
         return None;
     }
+    if request_complete(bytes) {
+        return Some(0);
+    }
     // Fixed-length requests (01..06) are 8 bytes; 15 and 16 carry their byte count at 6.
     if n >= 8 && request_complete(&bytes[n - 8..]) {
         return Some(n - 8);
@@ -358,6 +361,8 @@ pub struct ScadaSlave {
     pub valve_permille: u16,
     /// Virtual bench fault injection bits (0..=15).
     pub faults: u16,
+    /// Writes of mode 0 (stop) so far (wraps): each acknowledges the latched alarms.
+    pub stop_writes: u16,
 }
 
 impl ScadaSlave {
@@ -371,6 +376,7 @@ impl ScadaSlave {
             virtual_bench: false,
             valve_permille: VALVE_NOMINAL_PERMILLE,
             faults: 0,
+            stop_writes: 0,
         })
     }
 
@@ -487,7 +493,12 @@ impl ScadaSlave {
             let v = u16::from_be_bytes([word[0], word[1]]);
             match usize::from(address) + k {
                 0 if v <= SETPOINT_MAX => next.setpoint = v,
-                1 => next.mode = Mode::from_register(v).ok_or(ErrorKind::IllegalDataValue)?,
+                1 => {
+                    next.mode = Mode::from_register(v).ok_or(ErrorKind::IllegalDataValue)?;
+                    if next.mode == Mode::Stop {
+                        next.stop_writes = next.stop_writes.wrapping_add(1);
+                    }
+                }
                 2 => {
                     next.arithmetic = match v {
                         0 => Arithmetic::F32,
@@ -734,6 +745,18 @@ mod tests {
             assert_eq!(request_at_end(&long[..k]), None, "{k} bytes");
         }
         assert_eq!(request_at_end(&long), Some(0));
+        // A whole long write (a read request inside its data) is taken whole: the whole
+        // buffer is checked before any tail of it.
+        let mut body = vec![1, 16, 0, 0, 0, 4, 8];
+        body.extend_from_slice(&frame(&[1, 4, 0, 0, 0, 1])[..6]);
+        let tail = crc16(&[1, 4, 0, 0, 0, 1]).to_le_bytes();
+        body.extend_from_slice(&tail);
+        let whole = frame(&body);
+        assert_eq!(
+            request_at_end(&whole),
+            Some(0),
+            "the whole frame, not its tail"
+        );
         // A truncated request and a whole one right after it: the whole one is found.
         let mut split = read[..5].to_vec();
         split.extend_from_slice(&read);

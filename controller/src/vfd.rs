@@ -127,6 +127,8 @@ struct Pending {
     kind: Kind,
     sent_ms: u32,
     attempt: u8,
+    /// The write carries the requested reference (not the safe value instead of it).
+    delivers_request: bool,
 }
 
 /// The master's state.
@@ -142,6 +144,9 @@ pub struct VfdMaster {
     /// Failed reads in a row (only a good read resets it).
     read_failures_in_row: u8,
     alarm: bool,
+    /// During the alarm, a safe (0 %) write has been delivered: the next writes carry the
+    /// requested reference, whose delivery clears the alarm.
+    link_proven: bool,
     blind: bool,
     readings: VfdReadings,
     exchanges_ok: u32,
@@ -160,6 +165,7 @@ impl VfdMaster {
             write_failures_in_row: 0,
             read_failures_in_row: 0,
             alarm: true,
+            link_proven: false,
             blind: true,
             readings: VfdReadings::default(),
             exchanges_ok: 0,
@@ -226,27 +232,35 @@ impl VfdMaster {
         }
     }
 
-    /// Starts the next exchange if none is under way: alternately the torque reference
-    /// (`requested_pct`, forced to 0 % during the alarm) and the read block. The frame to send
-    /// is written to `out`.
+    /// Starts the next exchange if none is under way: alternately the torque reference and the
+    /// read block. During the alarm the reference written is 0 % until one such write is
+    /// delivered, then `requested_pct` again: the alarm clears only when the requested
+    /// reference itself is delivered, so a drive that takes 0 % but refuses the reference
+    /// keeps the alarm (and the analog output at 0 %) instead of toggling it. The frame to
+    /// send is written to `out`.
     pub fn start(&mut self, now_ms: u32, requested_pct: f32, out: &mut Frame) -> Option<usize> {
         out.clear();
         if self.pending.is_some() {
             return None;
         }
-        let kind = if self.next_is_write {
-            Kind::WriteTorque(
-                self.map
-                    .torque_counts(self.applied_torque_pct(requested_pct)),
-            )
+        let requested = self.map.torque_counts(requested_pct);
+        let (kind, delivers_request) = if self.next_is_write {
+            // In the alarm: the safe value until the link takes a write, then the request.
+            let counts = if self.alarm && !self.link_proven {
+                0
+            } else {
+                requested
+            };
+            (Kind::WriteTorque(counts), counts == requested)
         } else {
-            Kind::Read
+            (Kind::Read, false)
         };
         self.next_is_write = !self.next_is_write;
         self.pending = Some(Pending {
             kind,
             sent_ms: now_ms,
             attempt: 0,
+            delivers_request,
         });
         self.request(kind, out)
     }
@@ -264,6 +278,9 @@ impl VfdMaster {
 
     fn failed(&mut self, kind: Kind) {
         let limit = self.map.fail_limit;
+        if matches!(kind, Kind::WriteTorque(_)) {
+            self.link_proven = false;
+        }
         self.failures_in_row = self.failures_in_row.saturating_add(1);
         let of_kind = match kind {
             Kind::WriteTorque(_) => &mut self.write_failures_in_row,
@@ -275,12 +292,17 @@ impl VfdMaster {
         self.blind |= all || self.read_failures_in_row >= limit;
     }
 
-    fn succeeded(&mut self, kind: Kind) {
+    fn succeeded(&mut self, p: Pending) {
         self.failures_in_row = 0;
-        match kind {
+        match p.kind {
             Kind::WriteTorque(_) => {
                 self.write_failures_in_row = 0;
-                self.alarm = false;
+                if p.delivers_request {
+                    self.alarm = false;
+                    self.link_proven = false;
+                } else {
+                    self.link_proven = true;
+                }
             }
             Kind::Read => {
                 self.read_failures_in_row = 0;
@@ -305,7 +327,7 @@ impl VfdMaster {
             }
             Answer::Ok => {
                 self.pending = None;
-                self.succeeded(p.kind);
+                self.succeeded(p);
             }
         }
     }
@@ -429,7 +451,10 @@ mod tests {
         assert!(m.alarm(), "nothing answered yet");
         exchange(&mut m, &mut d, 0, 50.0);
         assert_eq!(d.reference, 0, "the first write is the safe value");
-        assert!(!m.alarm());
+        assert!(
+            m.alarm(),
+            "the link takes writes, but the request is not delivered yet"
+        );
         exchange(&mut m, &mut d, 10, 50.0);
         assert_eq!(
             m.readings(),
@@ -441,6 +466,7 @@ mod tests {
         );
         exchange(&mut m, &mut d, 20, 50.0);
         assert_eq!(d.reference, 8192);
+        assert!(!m.alarm(), "the request delivered");
         let mut m10 = VfdMap::example_16384();
         m10.counts_per_100_pct = 10_000;
         assert_eq!(m10.torque_counts(50.0), 5000);
@@ -456,8 +482,9 @@ mod tests {
             reference: 0,
             block: [0; 3],
         };
-        exchange(&mut m, &mut d, 0, 60.0);
-        exchange(&mut m, &mut d, 0, 60.0);
+        for _ in 0..3 {
+            exchange(&mut m, &mut d, 0, 60.0);
+        }
         assert!(!m.alarm());
         let mut out = Frame::new();
         let mut now = 1000;
@@ -476,21 +503,63 @@ mod tests {
             assert_eq!(m.alarm(), failure >= 3);
         }
         assert_eq!(m.applied_torque_pct(60.0), 0.0);
-        // The next write carries the safe value; its answer brings the link back.
-        let write = loop {
-            let n = m.start(now, 60.0, &mut out).unwrap();
+        // The next write carries the safe value; its answer proves the link, and the write
+        // after it, the request, brings the link back.
+        let mut next_write = |m: &mut VfdMaster, now: &mut u32| loop {
+            let n = m.start(*now, 60.0, &mut out).unwrap();
             if out[1] == 6 {
                 break out[..n].to_vec();
             }
             for _ in 0..3 {
-                now += 100;
-                m.poll(now, &mut out);
+                *now += 100;
+                m.poll(*now, &mut out);
             }
         };
+        let write = next_write(&mut m, &mut now);
         assert_eq!(u16::from_be_bytes([write[4], write[5]]), 0);
+        m.receive(&d.answer(&write));
+        assert!(m.alarm(), "0 % delivered is not the request delivered");
+        assert_eq!(m.applied_torque_pct(60.0), 0.0);
+        let write = next_write(&mut m, &mut now);
+        assert_eq!(u16::from_be_bytes([write[4], write[5]]), 9830, "60 %");
         m.receive(&d.answer(&write));
         assert!(!m.alarm());
         assert_eq!(m.applied_torque_pct(60.0), 60.0);
+    }
+
+    /// Regression (review): a drive that takes 0 % but refuses every other reference (its
+    /// scaling differs from the map's) used to clear the alarm on each 0 % write and raise it
+    /// again 0.9 s later, so the analog output pulsed to the request and back. The alarm now
+    /// stands, and the output stays at 0 %, until the request itself is delivered.
+    #[test]
+    fn a_drive_that_refuses_all_but_zero_keeps_the_alarm() {
+        let mut m = VfdMaster::new(VfdMap::example_16384()).unwrap();
+        let mut d = Drive {
+            reference: 0,
+            block: [0; 3],
+        };
+        let mut out = Frame::new();
+        let mut toggles = 0;
+        let mut was = m.alarm();
+        for now in 0..10_000u32 {
+            let mut sent = m.poll(now, &mut out).map(|n| out[..n].to_vec());
+            if sent.is_none() {
+                sent = m.start(now, 70.0, &mut out).map(|n| out[..n].to_vec());
+            }
+            if let Some(req) = sent {
+                let refuse = req[1] == 6 && u16::from_be_bytes([req[4], req[5]]) > 0;
+                m.receive(&if refuse {
+                    with_crc(&[req[0], 0x86, 3])
+                } else {
+                    d.answer(&req)
+                });
+            }
+            assert_eq!(m.applied_torque_pct(70.0), 0.0, "at {now} ms");
+            toggles += usize::from(m.alarm() != was);
+            was = m.alarm();
+        }
+        assert!(m.alarm());
+        assert_eq!(toggles, 0, "the alarm never cleared");
     }
 
     #[test]

@@ -388,6 +388,15 @@ fn the_observer_follows_the_valve_and_the_alarms_follow_injected_faults() {
         write_holding(&mut app, 4, 0);
         run(&mut app, &mut io, 4000);
     }
+    // Dry run is latched: it stands after its cause has gone, until SCADA writes "stop".
+    assert!(read_observer(&mut app).3 & DRY_RUN != 0, "latched");
+    write_holding(&mut app, 1, 0);
+    run(&mut app, &mut io, 100);
+    assert_eq!(
+        read_observer(&mut app).3 & DRY_RUN,
+        0,
+        "acknowledged by a stop"
+    );
 }
 /// From rest (the outlet below the pressure span: clamped readings are not fed to the
 /// observer) into the paper's pulses for a minute: no alarm on the healthy virtual bench.

@@ -99,6 +99,12 @@ pub trait Board: Io {
     /// Nothing to do until the next event (QEMU: `wfi`; a board polling a line at 19 200 baud
     /// returns at once).
     fn idle(&mut self) {}
+    /// `true` if SCADA requests may also end by their content (length and CRC), for a line
+    /// that marks no silence (QEMU). A real RS-485 line frames by silence only: on a shared
+    /// bus, content framing could take a request out of another slave's traffic.
+    fn frames_by_content(&self) -> bool {
+        false
+    }
 }
 
 /// The loop: SCADA frames answered as they complete (by their length and CRC, or by the
@@ -111,7 +117,12 @@ pub fn serve<S: Uart, B: Board>(app: &mut Loop, scada: &mut RtuPort<S>, board: &
     loop {
         let now = board.now_ms();
         board.poll(now);
-        if scada.receive_complete(now, &mut frame, controller::scada::request_at_end) {
+        let complete = if board.frames_by_content() {
+            scada.receive_complete(now, &mut frame, controller::scada::request_at_end)
+        } else {
+            scada.receive(now, &mut frame)
+        };
+        if complete {
             if let Some(n) = app.scada_frame(&frame, &mut response) {
                 scada.send(&response[..n]);
             }

@@ -141,6 +141,10 @@ pub struct MonitorInputs<T> {
 struct Timer<T> {
     active: bool,
     held_s: T,
+    /// The clearing condition held at the last update.
+    clear_now: bool,
+    /// The alarm is latched (as configured at the last update).
+    latched: bool,
 }
 
 impl<T: Real> Timer<T> {
@@ -148,6 +152,8 @@ impl<T: Real> Timer<T> {
     /// inlined: eight copies cost the MCU image ≈ 1 KB.
     #[inline(never)]
     fn update(&mut self, dt: T, raise: bool, clear: bool, raise_s: T, clear_s: T, latched: bool) {
+        self.clear_now = clear;
+        self.latched = latched;
         let want = if self.active {
             clear && !latched
         } else {
@@ -175,7 +181,6 @@ pub struct Monitor<T> {
     last_speed: Option<T>,
     /// Last measured flow and its age, s.
     last_flow: Option<(T, T)>,
-    dry_run_clear_now: bool,
     accel: T,
     gamma: [T; 6],
     beta: [T; 10],
@@ -191,11 +196,12 @@ impl<T: Real> Monitor<T> {
             timers: [Timer {
                 active: false,
                 held_s: T::ZERO,
+                clear_now: true,
+                latched: false,
             }; 8],
             nis_avg: T::ZERO,
             last_speed: None,
             last_flow: None,
-            dry_run_clear_now: true,
             accel: par.nominal_torque_nm / T::from_f64(100.0) / par.inertia_kg_m2
                 * T::from_f64(crate::params::RPM_PER_RAD_S),
             gamma: par.gamma,
@@ -216,12 +222,15 @@ impl<T: Real> Monitor<T> {
             .fold(0, |acc, (i, t)| acc | (u16::from(t.active) << i))
     }
 
-    /// Clears the latched alarms whose cause has gone (their clearing condition holds now).
+    /// Clears the latched alarms whose cause has gone (their clearing condition held at the
+    /// last update); an alarm whose cause stands stays. Unlatched alarms are not touched.
     pub fn acknowledge(&mut self) {
         for t in self.timers.iter_mut() {
-            t.held_s = T::ZERO;
+            if t.latched && t.active && t.clear_now {
+                t.active = false;
+                t.held_s = T::ZERO;
+            }
         }
-        self.timers[3].active &= !self.dry_run_clear_now;
     }
 
     /// One update; returns the alarm bits.
@@ -264,11 +273,10 @@ impl<T: Real> Monitor<T> {
         let fast = speed > c.min_speed_rpm && needed > T::ZERO;
         let ratio = if fast { shown / needed } else { T::ONE };
         let d = c.dry_run;
-        self.dry_run_clear_now = ratio > d.threshold + d.hysteresis;
         self.timers[3].update(
             dt,
             ratio < d.threshold,
-            self.dry_run_clear_now,
+            ratio > d.threshold + d.hysteresis,
             d.raise_s,
             d.clear_s,
             d.latched,
@@ -552,6 +560,15 @@ mod tests {
             mon.update(&ok);
         }
         assert!(mon.bits() & DRY_RUN != 0, "latched");
+        let mut stands = input(e);
+        mon.update(&stands);
+        mon.acknowledge();
+        assert!(
+            mon.bits() & DRY_RUN != 0,
+            "not acknowledged while the cause stands"
+        );
+        stands.vfd_torque_pct = None;
+        mon.update(&stands);
         mon.acknowledge();
         assert_eq!(mon.bits() & DRY_RUN, 0, "acknowledged with the cause gone");
         // Load changed is not latched: it clears by itself.

@@ -623,6 +623,7 @@ impl<T: Real> Observer<T> {
             out[i][i] += *q * dt;
         }
         self.p = out;
+        self.cap_variances();
         self.symmetrize();
     }
 
@@ -722,6 +723,24 @@ impl<T: Real> Observer<T> {
             used: Use::Used,
             value: nu,
             nis,
+        }
+    }
+
+    /// Keeps each variance at most its initial one: with nothing to observe (at rest, no
+    /// flow) the random walks would otherwise grow it without bound, and the first readings
+    /// after hours would throw k2 and the scales to their limits. Row and column are scaled
+    /// together (D P D), which keeps P positive definite.
+    fn cap_variances(&mut self) {
+        for i in 0..STATES {
+            let s = self.cfg.initial_sigma[i];
+            let cap = s * s;
+            if self.p[i][i] > cap {
+                let f = (cap / self.p[i][i]).sqrt();
+                for j in 0..STATES {
+                    self.p[i][j] = self.p[i][j] * f;
+                    self.p[j][i] = self.p[j][i] * f;
+                }
+            }
         }
     }
 
@@ -1200,6 +1219,40 @@ mod robustness {
         }
         println!("f32 vs f64: worst relative difference {worst:.2e}");
         assert!(worst < 1e-3, "{worst}");
+    }
+
+    /// Eight hours at rest (nothing to observe: no pressure in span, little flow), then the
+    /// pulses: the variances stay at most their initial ones, and the estimates are right
+    /// within seconds instead of slamming k2 to its limits.
+    #[test]
+    fn hours_at_rest_do_not_inflate_the_covariance() {
+        let mut o = Observer::<f32>::new(ObserverConfig::paper(), 0.0).unwrap();
+        let c = ObserverConfig::<f32>::paper();
+        for _ in 0..(8 * 3600 * 20) {
+            o.step(0.05, 0.0, &Measurements::default()).unwrap();
+        }
+        for i in 0..STATES {
+            let cap = c.initial_sigma[i] * c.initial_sigma[i];
+            assert!(o.covariance()[i][i] <= cap * 1.0001, "variance {i}");
+        }
+        let rows = super::tests::record(8, 40.0, 0.03, &[]);
+        let mut worst: f64 = 0.0;
+        for (i, r) in rows.iter().enumerate() {
+            let m = Measurements {
+                pressure_mca: Some(r.p_meas as f32),
+                flow_lps: (i % 2 == 1).then_some(r.q_meas as f32),
+                speed_rpm: Some(r.w_meas as f32),
+            };
+            let e = o.step(0.05, r.torque_pct as f32, &m).unwrap();
+            if r.t_s > 5.0 {
+                worst = worst.max((f64::from(e.valve_k2) / r.k2 - 1.0).abs());
+            }
+        }
+        println!(
+            "after 8 h at rest: k2 worst {:.2} % from 5 s of pulses",
+            worst * 100.0
+        );
+        assert!(worst < 0.03);
     }
 
     /// A pressure transmitter at 2 mA (−1.25 mca on a 0..10 mca span) for 20 s: not used;

@@ -245,8 +245,12 @@ fn run(qemu: OwnedFd, master: PtyMaster, path: &str, stats: &Stats, stop: &Atomi
                     add(&stats.dropped_not_read, n - sent);
                 }
                 Ok(n) => add(&stats.dropped_no_client, n),
-                Err(nix::errno::Errno::EAGAIN) => {}
-                Err(_) => return,
+                Err(nix::errno::Errno::EAGAIN | nix::errno::Errno::EINTR) => {}
+                Err(e) => {
+                    // QEMU closed its side (it exited): nothing left to bridge.
+                    eprintln!("SCADA line: QEMU's pty: {e}; the bridge stops");
+                    return;
+                }
             }
         }
     }
