@@ -203,7 +203,7 @@ pub fn write_fixed(out: &mut impl core::fmt::Write, x: f32, decimals: u32) -> co
     let d = decimals.min(6);
     let scale = 10u32.pow(d);
     let v = x.abs() * scale as f32 + 0.5;
-    if !(v < 4.294_967e9) {
+    if v >= 4.294_967e9 {
         return out.write_str("ovf");
     }
     let a = v as u32;
