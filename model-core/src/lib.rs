@@ -32,6 +32,13 @@
 //! and this crate keeps the state in rpm, with the unit in every name (`speed_rpm`,
 //! `flow_lps`, `pressure_mca`, `torque_ref_pct`); rad/s is given at the output.
 //!
+//! # The observer and the alarms
+//!
+//! [`observer`] is an extended Kalman filter on this bench: speed, flow, the valve k2 and the
+//! curves' scales from whatever measurements arrive (pressure, flow, the VFD's speed), each
+//! with its standard deviation; [`monitor`] turns it and the measurements into alarms (dry
+//! run, no flow, end of curve, load changed, model residual, transmitter and link faults).
+//!
 //! # Use
 //!
 //! ```
