@@ -10,8 +10,7 @@
 
 mod common;
 use common::{pumpbench, refused, write};
-use model_core::excitation::SplitMix64;
-use model_core::{BenchParams, Scheme, WhiteBox};
+use model_core::WhiteBox;
 use std::path::Path;
 use std::process::Output;
 
@@ -51,59 +50,7 @@ flow_sd_lps,pressure_sd_mca,valve_k2_sd,head_scale_sd,torque_scale,torque_scale_
 pump_head_mca,pipe_loss_mca,hydraulic_power_w,pressure_innovation_mca,pressure_nis,\
 flow_innovation_lps,flow_nis,speed_innovation_rpm,speed_nis,alarm_bits";
 
-// ---- the synthetic bench, as `bench-data` makes it, with its truth ----
-
-/// A transmitter as `bench-data` models it: lag, noise, 4-20 mA span read by a 12-bit ADC
-/// over 0..24 mA (span 0: not quantised).
-#[derive(Clone, Copy)]
-struct Transmitter {
-    tau_s: f64,
-    noise: f64,
-    span: f64,
-}
-
-const PRESSURE: Transmitter = Transmitter {
-    tau_s: 0.020,
-    noise: 0.003,
-    span: 10.0,
-};
-const FLOW: Transmitter = Transmitter {
-    tau_s: 0.040,
-    noise: 0.02,
-    span: 30.0,
-};
-const SPEED: Transmitter = Transmitter {
-    tau_s: 0.0,
-    noise: 0.5,
-    span: 0.0,
-};
-
-fn gaussian(rng: &mut SplitMix64) -> f64 {
-    let u1 = rng.next_f64().max(1e-300);
-    let u2 = rng.next_f64();
-    (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
-}
-
-impl Transmitter {
-    fn read(&self, lagged: f64, rng: &mut SplitMix64) -> f64 {
-        let noisy = lagged + self.noise * gaussian(rng);
-        if self.span <= 0.0 {
-            return noisy;
-        }
-        let code = ((4.0 + 16.0 * noisy / self.span) / 24.0 * 4095.0)
-            .round()
-            .clamp(0.0, 4095.0);
-        (code / 4095.0 * 24.0 - 4.0) / 16.0 * self.span
-    }
-
-    fn lag(&self, x: &mut f64, target: f64, h: f64) {
-        if self.tau_s <= 0.0 {
-            *x = target;
-        } else {
-            *x += (1.0 - (-h / self.tau_s).exp()) * (target - *x);
-        }
-    }
-}
+// ---- the synthetic bench: `bench-data` with its truth ----
 
 /// One row of a record: the torque from this row's time on, the readings and the truth at it.
 #[derive(Clone, Copy)]
@@ -144,61 +91,55 @@ fn torque_input(seed: u64, seconds: f64) -> Vec<(f64, f64)> {
         .collect()
 }
 
-/// The true bench: curves off by `e` (head × (1 + e), load torque × (1 − e)), the valve's k2
-/// `factor` × the paper's from each step's time (applied at the first 1 ms step at or after
-/// it), integrated with RK4 at 1 ms; readings as `bench-data`'s (seeded noise).
+/// `bench-data --truth` on `input`: curves off by `e` (head × (1 + e), load torque × (1 − e)),
+/// the valve's k2 `factor` × the paper's from each step's time, readings with `seed`'s noise.
 fn bench_record(input: &[(f64, f64)], e: f64, steps: &[(f64, f64)], seed: u64) -> Vec<Row> {
-    let mut par = BenchParams::<f64>::paper();
-    for a in par.alpha.iter_mut() {
-        *a *= 1.0 + e;
+    let dir = tempfile::tempdir().unwrap();
+    let mut u = String::from("t_s,torque_ref_pct\n");
+    for (t, v) in input {
+        u += &format!("{t},{v}\n");
     }
-    for b in par.beta.iter_mut() {
-        *b *= 1.0 - e;
+    let u = write(dir.path(), "u.csv", &u);
+    let steps: Vec<String> = steps.iter().map(|(t, f)| format!("{t}:{f}")).collect();
+    let (curve, seed) = (format!("{:.3}", e * 100.0), seed.to_string());
+    let mut args = vec!["bench-data", "--input", &u, "--seed", &seed, "--truth"];
+    args.extend(["--curve-error", &curve]);
+    let steps = steps.join(",");
+    if !steps.is_empty() {
+        args.extend(["--valve-steps", &steps]);
     }
-    let (k2_nominal, c) = (par.valve_k2, par.static_head_c_mca);
-    let mut bench = WhiteBox::new(par).unwrap();
-    let mut state = bench.steady_state(input[0].1).unwrap();
-    let s0 = bench.signals(&state);
-    let (mut p, mut q, mut w) = (s0.pressure_mca, s0.flow_lps, s0.speed_rpm);
-    let mut rng = SplitMix64::new(seed ^ 0x0b5e);
-    let mut k2 = k2_nominal;
-    let mut next_step = 0;
-    let mut rows = Vec::with_capacity(input.len());
-    for i in 0..input.len() {
-        if i > 0 {
-            let (t0, u) = input[i - 1];
-            let dt = input[i].0 - t0;
-            let n = (dt / 1e-3).round().max(1.0) as usize;
-            let h = dt / n as f64;
-            for j in 0..n {
-                let now = t0 + j as f64 * h;
-                while next_step < steps.len() && now >= steps[next_step].0 - 1e-9 {
-                    k2 = k2_nominal * steps[next_step].1;
-                    bench.set_load(k2, c).unwrap();
-                    next_step += 1;
-                }
-                bench.step(&mut state, u, h, Scheme::Rk4).unwrap();
-                let s = bench.signals(&state);
-                PRESSURE.lag(&mut p, s.pressure_mca, h);
-                FLOW.lag(&mut q, s.flow_lps, h);
-                SPEED.lag(&mut w, s.speed_rpm, h);
+    let text = ok(&pumpbench(&args), "bench-data");
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let c = [
+        "t_s",
+        "torque_ref_pct",
+        "speed_rpm",
+        "flow_lps",
+        "pressure_mca",
+        "speed_true",
+        "flow_true",
+        "pressure_true",
+        "k2_true",
+    ]
+    .map(col);
+    lines
+        .map(|l| {
+            let v: Vec<f64> = l.split(',').map(|x| x.parse().unwrap()).collect();
+            Row {
+                t: v[c[0]],
+                u: v[c[1]],
+                speed: v[c[2]],
+                flow: v[c[3]],
+                pressure: v[c[4]],
+                speed_true: v[c[5]],
+                flow_true: v[c[6]],
+                pressure_true: v[c[7]],
+                k2_true: v[c[8]],
             }
-        }
-        let s = bench.signals(&state);
-        let round = |x: f64, d: i32| (x * 10f64.powi(d)).round() / 10f64.powi(d);
-        rows.push(Row {
-            t: input[i].0,
-            u: input[i].1,
-            speed: round(SPEED.read(w, &mut rng), 2),
-            flow: round(FLOW.read(q, &mut rng), 4),
-            pressure: round(PRESSURE.read(p, &mut rng), 5),
-            speed_true: s.speed_rpm,
-            flow_true: s.flow_lps,
-            pressure_true: s.pressure_mca,
-            k2_true: k2,
-        });
-    }
-    rows
+        })
+        .collect()
 }
 
 /// The record as CSV, with the truth columns; the flow and speed cells empty from
