@@ -137,8 +137,7 @@ impl VirtualBench {
             let te = model_core::equations::electromagnetic_torque_pct(&p.gamma, u);
             let w = self.state.speed_rpm;
             let friction = p.beta[8] * w + p.beta[9];
-            let accel = p.nominal_torque_nm / 100.0 / p.inertia_kg_m2
-                * model_core::params::RPM_PER_RAD_S as f32;
+            let accel = self.bench.accel_rpm_per_s_per_pct();
             self.state.speed_rpm = (w + 1e-3 * accel * (te - friction)).clamp(0.0, 6000.0);
             self.state.flow_lps = 0.0;
         } else {

@@ -17,7 +17,7 @@
 //! held for its clear delay.
 
 use crate::equations::{electromagnetic_torque_pct, load_torque_pct};
-use crate::observer::{Estimate, Use};
+use crate::observer::{clamp_torque, Estimate, Use};
 use crate::params::{BenchParams, FITTED_FLOW_MAX_LPS};
 use crate::scalar::Real;
 
@@ -202,8 +202,7 @@ impl<T: Real> Monitor<T> {
             nis_avg: T::ZERO,
             last_speed: None,
             last_flow: None,
-            accel: par.nominal_torque_nm / T::from_f64(100.0) / par.inertia_kg_m2
-                * T::from_f64(crate::params::RPM_PER_RAD_S),
+            accel: par.accel_rpm_per_s_per_pct(),
             gamma: par.gamma,
             beta: par.beta,
         }
@@ -266,7 +265,7 @@ impl<T: Real> Monitor<T> {
         let flow = self.last_flow.map_or(e.flow_lps, |(q, _)| q);
         let delivered = match m.vfd_torque_pct {
             Some(t) if t.is_finite() => t,
-            _ => electromagnetic_torque_pct(&self.gamma, clamp_pct(m.torque_ref_pct)),
+            _ => electromagnetic_torque_pct(&self.gamma, clamp_torque(m.torque_ref_pct)),
         };
         let shown = delivered - rate / accel;
         let needed = load_torque_pct(&self.beta, speed, flow);
@@ -336,14 +335,6 @@ impl<T: Real> Monitor<T> {
             s.latched,
         );
         self.bits()
-    }
-}
-
-fn clamp_pct<T: Real>(u: T) -> T {
-    if u.is_finite() {
-        u.max(T::ZERO).min(T::from_f64(100.0))
-    } else {
-        T::ZERO
     }
 }
 

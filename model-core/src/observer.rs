@@ -45,7 +45,7 @@
 
 use crate::equations::{electromagnetic_torque_pct, CubicInFlow};
 use crate::flow::solve_flow;
-use crate::params::{BenchParams, RPM_PER_RAD_S};
+use crate::params::BenchParams;
 use crate::scalar::Real;
 use crate::BenchError;
 
@@ -359,8 +359,7 @@ impl<T: Real> Observer<T> {
     pub fn new(config: ObserverConfig<T>, torque_ref_pct: T) -> Result<Self, ObserverError> {
         config.validate()?;
         let par = &config.params;
-        let accel = par.nominal_torque_nm / T::from_f64(100.0) / par.inertia_kg_m2
-            * T::from_f64(RPM_PER_RAD_S);
+        let accel = par.accel_rpm_per_s_per_pct();
         let mut o = Self {
             cfg: config,
             accel,
@@ -522,12 +521,11 @@ impl<T: Real> Observer<T> {
     }
 
     fn predict(&mut self, dt: T, u: T) {
-        let cfg = self.cfg;
-        let te = electromagnetic_torque_pct(&cfg.params.gamma, u);
+        let te = electromagnetic_torque_pct(&self.cfg.params.gamma, u);
         // Transition matrix, linearised at the start.
         let h0 = self.hydraulics(&self.x.clone());
         if dt != self.step_consts.dt {
-            self.step_consts = StepConsts::new(&cfg, dt);
+            self.step_consts = StepConsts::new(&self.cfg, dt);
         }
         let k = self.step_consts;
         let two = T::from_f64(2.0);
@@ -612,12 +610,12 @@ impl<T: Real> Observer<T> {
             }
         }
         let qd = [
-            cfg.speed_psd,
-            cfg.k2_psd,
-            cfg.head_scale_psd,
-            cfg.torque_scale_psd,
-            cfg.lag_psd,
-            cfg.lag_psd,
+            self.cfg.speed_psd,
+            self.cfg.k2_psd,
+            self.cfg.head_scale_psd,
+            self.cfg.torque_scale_psd,
+            self.cfg.lag_psd,
+            self.cfg.lag_psd,
         ];
         for (i, q) in qd.iter().enumerate() {
             out[i][i] += *q * dt;
@@ -876,7 +874,8 @@ fn unreachable_estimate<T: Real>(x: &Vector<T>) -> Estimate<T> {
     }
 }
 
-fn clamp_torque<T: Real>(u: T) -> T {
+/// A torque reference as the models take it: NaN and ±∞ as 0, clamped to 0..=100 %.
+pub(crate) fn clamp_torque<T: Real>(u: T) -> T {
     if u.is_finite() {
         u.max(T::ZERO).min(T::from_f64(100.0))
     } else {
@@ -1075,7 +1074,7 @@ pub(crate) mod tests {
                 let te = crate::equations::electromagnetic_torque_pct(&p.gamma, u);
                 let w = state.speed_rpm;
                 let friction = p.beta[8] * w + p.beta[9];
-                let k = p.nominal_torque_nm / 100.0 / p.inertia_kg_m2 * RPM_PER_RAD_S;
+                let k = bench.accel_rpm_per_s_per_pct();
                 state.speed_rpm = (w + 1e-3 * k * (te - friction)).max(0.0);
                 let mut s = bench.signals(&state);
                 s.flow_lps = 0.0;

@@ -95,6 +95,14 @@ impl<T: Real> BenchParams<T> {
         }
     }
 
+    /// rpm/s of speed change per % of torque surplus: `(T_nom / 100) / J · 30/π` (≈ 42.95
+    /// with the paper's J and T_nom), computed in f64 and rounded once.
+    pub fn accel_rpm_per_s_per_pct(&self) -> T {
+        T::from_f64(
+            self.nominal_torque_nm.to_f64() / 100.0 / self.inertia_kg_m2.to_f64() * RPM_PER_RAD_S,
+        )
+    }
+
     /// Checks every value: all finite, α1 < 0 (the pump head falls at high flow, so the flow
     /// balance always has a bounded largest root), k1 ≥ 0, k2 ≥ 0, J > 0, nominal torque > 0.
     pub fn validate(&self) -> Result<(), BenchError> {

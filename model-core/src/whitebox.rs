@@ -130,16 +130,19 @@ impl<T: Real> WhiteBox<T> {
     }
 
     fn from_valid(params: BenchParams<T>) -> Self {
-        let accel = T::from_f64(
-            params.nominal_torque_nm.to_f64() / 100.0 / params.inertia_kg_m2.to_f64()
-                * RPM_PER_RAD_S,
-        );
+        let accel = params.accel_rpm_per_s_per_pct();
         Self {
             system_k: params.pipe_k1 + params.valve_k2 * params.valve_k2,
             accel,
             params,
             load_generation: 0,
         }
+    }
+
+    /// rpm/s of speed change per % of torque surplus
+    /// ([`BenchParams::accel_rpm_per_s_per_pct`]).
+    pub fn accel_rpm_per_s_per_pct(&self) -> T {
+        self.accel
     }
 
     /// The parameters in use.

@@ -3,53 +3,21 @@
 //! Without these options the record is what it was before they existed.
 
 mod common;
-use common::{pumpbench, write};
+use common::{ok, pumpbench, write, Table};
 
 /// Runs `bench-data` and returns its stdout, which must be a success.
 fn bench_data(args: &[&str]) -> String {
     let mut all = vec!["bench-data"];
     all.extend_from_slice(args);
-    let out = pumpbench(&all);
-    assert!(
-        out.status.success(),
-        "{args:?}: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8(out.stdout).unwrap()
+    ok(&pumpbench(&all), &format!("{args:?}"))
 }
 
-/// A record as its header and a map from column name to values.
-struct Record {
-    header: Vec<String>,
-    rows: Vec<Vec<f64>>,
-}
-
-impl Record {
-    fn parse(text: &str) -> Self {
-        let mut lines = text.lines();
-        let header = lines.next().unwrap().split(',').map(String::from).collect();
-        let rows = lines
-            .map(|l| l.split(',').map(|c| c.parse().unwrap()).collect())
-            .collect();
-        Record { header, rows }
-    }
-
-    fn col(&self, name: &str) -> Vec<f64> {
-        let i = self
-            .header
-            .iter()
-            .position(|h| h == name)
-            .unwrap_or_else(|| panic!("no column {name} in {:?}", self.header));
-        self.rows.iter().map(|r| r[i]).collect()
-    }
-
-    /// Index of the row at time `t_s` (exactly as written).
-    fn row_at(&self, t_s: f64) -> usize {
-        self.col("t_s")
-            .iter()
-            .position(|&t| t == t_s)
-            .unwrap_or_else(|| panic!("no row at {t_s} s"))
-    }
+/// Index of the row at time `t_s` (exactly as written).
+fn row_at(r: &Table, t_s: f64) -> usize {
+    r.col("t_s")
+        .iter()
+        .position(|&t| t == t_s)
+        .unwrap_or_else(|| panic!("no row at {t_s} s"))
 }
 
 /// `t_s,torque_ref_pct` rows every `ts_s` from 0 to `seconds` (times printed with 2 decimals,
@@ -134,7 +102,7 @@ fn a_valve_step_shows_in_k2_true_at_its_row_and_moves_flow_and_pressure() {
     let dir = tempfile::tempdir().unwrap();
     let u = write(dir.path(), "u.csv", &input(5.0, 0.05, |_| 50.0));
     // Closing at 2 s (a row's time), back to nominal at 3.01 s (between rows 3 and 3.05).
-    let r = Record::parse(&bench_data(&[
+    let r = Table::parse(&bench_data(&[
         "--input",
         &u,
         "--truth",
@@ -143,7 +111,7 @@ fn a_valve_step_shows_in_k2_true_at_its_row_and_moves_flow_and_pressure() {
     ]));
     let (k2, q, p) = (r.col("k2_true"), r.col("flow_true"), r.col("pressure_true"));
     let (qm, pm) = (r.col("flow_lps"), r.col("pressure_mca"));
-    let (at2, at3, at305) = (r.row_at(2.0), r.row_at(3.0), r.row_at(3.05));
+    let (at2, at3, at305) = (row_at(&r, 2.0), row_at(&r, 3.0), row_at(&r, 3.05));
     let closed = 0.1082 * 1.3;
     for (i, &k) in k2.iter().enumerate() {
         let expected = if i < at2 || i >= at305 {
@@ -164,7 +132,7 @@ fn a_valve_step_shows_in_k2_true_at_its_row_and_moves_flow_and_pressure() {
         p[at2]
     );
     // ... and in the readings once the transmitters have followed, until it opens again.
-    let settled = r.row_at(2.5);
+    let settled = row_at(&r, 2.5);
     assert!(qm[settled] < qm[before] - 0.5 && pm[settled] > pm[before] + 0.3);
     assert!(q[at3] < q[before] && p[at3] > p[before]);
     // Opening again: more flow, less pressure.
@@ -177,7 +145,7 @@ fn a_valve_step_shows_in_k2_true_at_its_row_and_moves_flow_and_pressure() {
 fn a_valve_step_at_or_before_the_first_row_sets_the_starting_valve() {
     let dir = tempfile::tempdir().unwrap();
     let u = write(dir.path(), "u.csv", &input(1.0, 0.1, |_| 50.0));
-    let r = Record::parse(&bench_data(&[
+    let r = Table::parse(&bench_data(&[
         "--input",
         &u,
         "--truth",
@@ -193,7 +161,7 @@ fn a_valve_step_at_or_before_the_first_row_sets_the_starting_valve() {
 
 /// Last row's true speed and flow at a constant torque of 50 %, and the first row's speed.
 fn steady_truth(u: &str, curve_error: &str) -> (f64, f64, f64) {
-    let r = Record::parse(&bench_data(&[
+    let r = Table::parse(&bench_data(&[
         "--input",
         u,
         "--truth",
@@ -213,7 +181,7 @@ fn a_positive_curve_error_raises_the_steady_speed_and_flow_at_a_fixed_torque() {
     let (wn, qn, _) = steady_truth(&u, "-5");
     // 0 %: the paper's steady state (as `steady` gives it).
     let out = pumpbench(&["steady", "--model", "whitebox", "--torque-pct", "50"]);
-    let steady = Record::parse(&String::from_utf8(out.stdout).unwrap());
+    let steady = Table::parse(&String::from_utf8(out.stdout).unwrap());
     assert!((w0 / steady.col("speed_rpm")[0] - 1.0).abs() < 1e-9);
     assert!((q0 / steady.col("flow_lps")[0] - 1.0).abs() < 1e-9);
     assert!(
@@ -224,7 +192,7 @@ fn a_positive_curve_error_raises_the_steady_speed_and_flow_at_a_fixed_torque() {
     assert!(wp > w0 * 1.01 && qp > q0 * 1.01, "{w0} {q0} -> {wp} {qp}");
     assert!(wn < w0 * 0.99 && qn < q0 * 0.99, "{w0} {q0} -> {wn} {qn}");
     // The readings follow the truth.
-    let r = Record::parse(&bench_data(&["--input", &u, "--curve-error", "5"]));
+    let r = Table::parse(&bench_data(&["--input", &u, "--curve-error", "5"]));
     let mean = |v: Vec<f64>| v.iter().sum::<f64>() / v.len() as f64;
     assert!((mean(r.col("speed_rpm")) - wp).abs() < 1.0);
 }
@@ -238,7 +206,7 @@ fn truth_columns_equal_the_readings_within_noise_where_the_signal_is_steady() {
         "u.csv",
         &input(6.0, 0.01, |t| if t < 3.0 { 30.0 } else { 70.0 }),
     );
-    let r = Record::parse(&bench_data(&["--input", &u, "--truth", "--seed", "11"]));
+    let r = Table::parse(&bench_data(&["--input", &u, "--truth", "--seed", "11"]));
     let t = r.col("t_s");
     // 5 σ of noise plus one ADC code (3.7 mm, 0.011 l/s).
     for (reading, truth, bound) in [
@@ -266,13 +234,13 @@ fn truth_columns_equal_the_readings_within_noise_where_the_signal_is_steady() {
     }
     // The second stretch differs from the first: the comparison is not of constants.
     let w = r.col("speed_true");
-    assert!(w[r.row_at(6.0)] > w[r.row_at(3.0)] + 100.0);
+    assert!(w[row_at(&r, 6.0)] > w[row_at(&r, 3.0)] + 100.0);
 }
 
 /// Flow and pressure errors (reading minus truth) 50 ms after the valve closes at 1 s, as
 /// fractions of the step of the truth (1.36 l/s down, 2.56 mca up), and in signal units.
 fn error_after_a_step(u: &str, flow_lag_ms: &str, pressure_lag_ms: &str) -> [f64; 4] {
-    let r = Record::parse(&bench_data(&[
+    let r = Table::parse(&bench_data(&[
         "--input",
         u,
         "--truth",
@@ -284,7 +252,7 @@ fn error_after_a_step(u: &str, flow_lag_ms: &str, pressure_lag_ms: &str) -> [f64
         pressure_lag_ms,
     ]));
     let (q, p) = (r.col("flow_true"), r.col("pressure_true"));
-    let (before, at, i) = (r.row_at(0.99), r.row_at(1.0), r.row_at(1.05));
+    let (before, at, i) = (row_at(&r, 0.99), row_at(&r, 1.0), row_at(&r, 1.05));
     let eq = r.col("flow_lps")[i] - q[i];
     let ep = r.col("pressure_mca")[i] - p[i];
     [eq / (q[before] - q[at]), ep / (p[before] - p[at]), eq, ep]
@@ -435,7 +403,7 @@ fn bad_options_are_refused_with_one_line_exit_2_and_no_output() {
     let left: Vec<_> = std::fs::read_dir(d).unwrap().collect();
     assert_eq!(left.len(), 1, "only the input, no partial files");
     // The limits themselves are accepted.
-    let r = Record::parse(&bench_data(&[
+    let r = Table::parse(&bench_data(&[
         "--input",
         &u,
         "--truth",

@@ -9,41 +9,9 @@
 //! -- --nocapture`.
 
 mod common;
-use common::{pumpbench, refused, write};
+use common::{ok, pumpbench, refused, write, Table};
 use model_core::WhiteBox;
 use std::path::Path;
-use std::process::Output;
-
-fn ok(out: &Output, what: &str) -> String {
-    assert!(
-        out.status.success(),
-        "{what}: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8(out.stdout.clone()).unwrap()
-}
-
-/// `observe`'s output: its header and rows.
-struct Table {
-    header: Vec<String>,
-    rows: Vec<Vec<f64>>,
-}
-
-impl Table {
-    fn parse(text: &str) -> Table {
-        let mut lines = text.lines();
-        let header = lines.next().unwrap().split(',').map(String::from).collect();
-        let rows = lines
-            .map(|l| l.split(',').map(|c| c.parse().unwrap()).collect())
-            .collect();
-        Table { header, rows }
-    }
-
-    fn col(&self, name: &str) -> Vec<f64> {
-        let i = self.header.iter().position(|h| h == name).unwrap();
-        self.rows.iter().map(|r| r[i]).collect()
-    }
-}
 
 const HEADER: &str = "t_s,speed_rpm,flow_lps,pressure_mca,valve_k2,head_scale,speed_sd_rpm,\
 flow_sd_lps,pressure_sd_mca,valve_k2_sd,head_scale_sd,torque_scale,torque_scale_sd,\

@@ -36,3 +36,43 @@ pub fn refused(out: &Output, expected: &[&str], what: &str) -> String {
     }
     err
 }
+
+/// Asserts that `out` is a success; returns its stdout.
+pub fn ok(out: &Output, what: &str) -> String {
+    assert!(
+        out.status.success(),
+        "{what}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout.clone()).unwrap()
+}
+
+/// A numeric CSV: its header and rows.
+pub struct Table {
+    /// Column names.
+    pub header: Vec<String>,
+    /// Rows of numbers.
+    pub rows: Vec<Vec<f64>>,
+}
+
+impl Table {
+    /// Parses `text` (a header line, then rows of numbers).
+    pub fn parse(text: &str) -> Table {
+        let mut lines = text.lines();
+        let header = lines.next().unwrap().split(',').map(String::from).collect();
+        let rows = lines
+            .map(|l| l.split(',').map(|c| c.parse().unwrap()).collect())
+            .collect();
+        Table { header, rows }
+    }
+
+    /// The column `name`.
+    pub fn col(&self, name: &str) -> Vec<f64> {
+        let i = self
+            .header
+            .iter()
+            .position(|h| h == name)
+            .unwrap_or_else(|| panic!("no column {name} in {:?}", self.header));
+        self.rows.iter().map(|r| r[i]).collect()
+    }
+}
