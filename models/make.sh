@@ -16,4 +16,5 @@ pb identify --data "$d/train_flow.csv" --target flow --na 7 --nb 7 --hidden 6 --
 # The firmware compiles these in.
 pb export --weights models/pressure.json --output firmware/src/models/pressure.rs
 pb export --weights models/flow.json --output firmware/src/models/flow.rs
+rustfmt --edition 2021 firmware/src/models/pressure.rs firmware/src/models/flow.rs
 # The training data stays in target/models-data (not committed; remade by this script).

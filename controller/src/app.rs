@@ -28,8 +28,8 @@ use crate::scada::{Arithmetic, Mode, Published, Response, ScadaSlave, Status};
 use crate::vfd::{Frame, VfdMap, VfdMaster};
 use model_core::excitation::{PulseTrain, SteppedPulses};
 use model_core::monitor::{Monitor, MonitorConfig, MonitorInputs};
-use model_core::narmax::fixed::{NarmaxQ, NarmaxQState};
-use model_core::narmax::{Narmax, NarmaxError, NarmaxOutput, NarmaxState};
+use model_core::narmax::mcu::{NarxF32, NarxF32State, NarxQ15, NarxQ15State};
+use model_core::narmax::{NarmaxError, NarmaxOutput};
 use model_core::observer::{Measurements, Observer, ObserverConfig, ObserverError};
 use model_core::{BenchError, BenchState, Scheme, Signals, WhiteBox};
 
@@ -123,25 +123,30 @@ impl core::fmt::Display for AppError {
     }
 }
 
-/// One NARMAX model in both arithmetics, with the history of the one in use.
+/// One NARMAX model in both arithmetics (compile-time data, `pumpbench export`), with the
+/// history of each: `F` frames, `H` hidden units.
 #[derive(Debug, Clone)]
-pub struct NarmaxModel<const N: usize, const H: usize> {
-    float: Narmax<f32, N, H>,
-    fixed: NarmaxQ<N, H>,
-    st: NarmaxState<f32, N>,
-    st_q: NarmaxQState<N>,
+pub struct NarmaxModel<const F: usize, const H: usize> {
+    float: &'static NarxF32<F, H>,
+    fixed: &'static NarxQ15<F, H>,
+    st: NarxF32State<F>,
+    st_q: NarxQ15State<F>,
     period_ms: u32,
     last: f32,
 }
 
-impl<const N: usize, const H: usize> NarmaxModel<N, H> {
-    /// The model sampled every `period_ms` (≥ 1) ms; quantised here for the fixed-point pass.
-    pub fn new(float: Narmax<f32, N, H>, period_ms: u32) -> Result<Self, AppError> {
+impl<const F: usize, const H: usize> NarmaxModel<F, H> {
+    /// The model sampled every `period_ms` (≥ 1) ms; `float` and `fixed` are the same model's
+    /// two passes (both made by `pumpbench export`).
+    pub fn new(
+        float: &'static NarxF32<F, H>,
+        fixed: &'static NarxQ15<F, H>,
+        period_ms: u32,
+    ) -> Result<Self, AppError> {
         if period_ms == 0 {
             return Err(AppError::Config("NARMAX period must be >= 1 ms"));
         }
-        let fixed = NarmaxQ::quantize(&float).map_err(AppError::Narmax)?;
-        let (u0, y0) = (0.0, float.scaling().1.mean);
+        let (u0, y0) = (0.0, float.output_mean());
         Ok(Self {
             st: float.state_at(u0, y0),
             st_q: fixed.state_at(u0, y0),

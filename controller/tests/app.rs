@@ -15,9 +15,9 @@ mod flow_model;
 mod pressure_model;
 
 type Loop = App<
-    { pressure_model::INPUTS },
+    { pressure_model::FRAMES },
     { pressure_model::HIDDEN },
-    { flow_model::INPUTS },
+    { flow_model::FRAMES },
     { flow_model::HIDDEN },
 >;
 
@@ -28,8 +28,8 @@ fn setup(mode: Mode, setpoint: u16) -> (Loop, VirtualIo) {
         virtual_bench: true,
         ..AppConfig::bench()
     };
-    let p = NarmaxModel::new(pressure_model::model().unwrap(), 50).unwrap();
-    let q = NarmaxModel::new(flow_model::model().unwrap(), 100).unwrap();
+    let p = NarmaxModel::new(&pressure_model::F32, &pressure_model::Q15, 50).unwrap();
+    let q = NarmaxModel::new(&flow_model::F32, &flow_model::Q15, 100).unwrap();
     let app = App::new(cfg, p, q).unwrap();
     let bench = VirtualBench::new(VirtualBenchConfig::default_offsets(7)).unwrap();
     (app, VirtualIo::new(bench, cfg.vfd).unwrap())

@@ -45,20 +45,19 @@ const FLOW_MS: u32 = (models::flow::SAMPLE_PERIOD_S * 1000.0 + 0.5) as u32;
 
 /// The controller loop with the compiled-in models.
 pub type Loop = App<
-    { models::pressure::INPUTS },
+    { models::pressure::FRAMES },
     { models::pressure::HIDDEN },
-    { models::flow::INPUTS },
+    { models::flow::FRAMES },
     { models::flow::HIDDEN },
 >;
 
-/// Builds the loop (models checked and quantised here, once).
+/// Builds the loop (the models are `static`s the compiler built, checked and quantised).
 pub fn build_loop(config: AppConfig) -> Result<Loop, AppError> {
-    let p = models::pressure::model().map_err(AppError::Narmax)?;
-    let q = models::flow::model().map_err(AppError::Narmax)?;
+    use models::{flow, pressure};
     App::new(
         config,
-        NarmaxModel::new(p, PRESSURE_MS)?,
-        NarmaxModel::new(q, FLOW_MS)?,
+        NarmaxModel::new(&pressure::F32, &pressure::Q15, PRESSURE_MS)?,
+        NarmaxModel::new(&flow::F32, &flow::Q15, FLOW_MS)?,
     )
 }
 

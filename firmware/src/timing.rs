@@ -7,7 +7,6 @@ use controller::bench::VirtualIo;
 use core::fmt::Write;
 use cortex_m::peripheral::{syst::SystClkSource, SYST};
 use model_core::monitor::{Monitor, MonitorConfig, MonitorInputs};
-use model_core::narmax::fixed::NarmaxQ;
 use model_core::observer::{Measurements, Observer, ObserverConfig};
 use model_core::{Scheme, WhiteBox};
 
@@ -79,12 +78,8 @@ pub fn report(
         rk4.time(|| bench.step(&mut st, u, 1e-3, Scheme::Rk4))
             .map_err(bad)?;
     }
-    let p = models::pressure::model().map_err(|_| core::fmt::Error)?;
-    let q = models::flow::model().map_err(|_| core::fmt::Error)?;
-    let (pq, qq) = (
-        NarmaxQ::quantize(&p).map_err(|_| core::fmt::Error)?,
-        NarmaxQ::quantize(&q).map_err(|_| core::fmt::Error)?,
-    );
+    let (p, pq) = (&models::pressure::F32, &models::pressure::Q15);
+    let (q, qq) = (&models::flow::F32, &models::flow::Q15);
     let (mut sp, mut spq) = (p.state_at(50.0, 2.66), pq.state_at(50.0, 2.66));
     let (mut sq, mut sqq) = (q.state_at(50.0, 15.8), qq.state_at(50.0, 15.8));
     let mut c = [

@@ -23,8 +23,8 @@
 
 use crate::scalar::Real;
 
-#[path = "narmax_fixed.rs"]
-pub mod fixed;
+#[path = "narmax_mcu.rs"]
+pub mod mcu;
 
 /// Largest input delay `nk` supported.
 pub const MAX_NK: usize = 8;
@@ -89,6 +89,11 @@ pub enum NarmaxError {
     BadValue,
     /// nk > [`MAX_NK`], or no regressor and no hidden unit.
     BadLags,
+    /// The MCU passes ([`mcu`]) take NARX models only: nc = 0 and nk ≥ 1.
+    NotNarx,
+    /// A hidden pre-activation can reach 2^14, or the output layer needs more than 16-bit
+    /// mantissas: the model does not fit the Q15 pass ([`mcu::NarxQ15`]).
+    FixedRange,
 }
 
 impl core::fmt::Display for NarmaxError {
@@ -100,6 +105,10 @@ impl core::fmt::Display for NarmaxError {
             }
             NarmaxError::BadValue => "non-finite weight or scaling, std <= 0, or empty range",
             NarmaxError::BadLags => "lags out of range (nk <= 8, at least one regressor)",
+            NarmaxError::NotNarx => "the firmware's passes take NARX models only (nc = 0, nk >= 1)",
+            NarmaxError::FixedRange => {
+                "a pre-activation or the output is too large for the Q15 pass"
+            }
         })
     }
 }

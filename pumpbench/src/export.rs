@@ -1,15 +1,18 @@
-//! `pumpbench export`: a model file as Rust source the firmware compiles in (f32 constants and
-//! a constructor through model-core, so the firmware checks the model as the host does).
+//! `pumpbench export`: a model file as Rust source the firmware compiles in: the NNSYSID
+//! weights (f64, as trained) and the two MCU passes built from them by model-core's `const fn`s
+//! (`NarxF32::build`, `NarxQ15::build`), so the compiler checks, re-lays-out and quantises
+//! the model and a bad one is a build error; plus the generic f32 pass, the host's reference.
 
 use crate::modelfile::ModelFile;
 use crate::num::Short;
 use crate::Failure;
+use model_core::narmax::mcu::{NarxF32, NarxQ15};
 use std::io::Write;
 
-fn f32_list(values: impl Iterator<Item = f64>) -> String {
-    let items: Vec<String> = values.map(|v| format!("{:?}", v as f32)).collect();
+fn f64_list(values: impl Iterator<Item = f64>) -> String {
+    let items: Vec<String> = values.map(|v| format!("{v:?}")).collect();
     let mut out = String::new();
-    for chunk in items.chunks(6) {
+    for chunk in items.chunks(4) {
         out += "    ";
         out += &chunk.join(", ");
         out += ",\n";
@@ -17,8 +20,24 @@ fn f32_list(values: impl Iterator<Item = f64>) -> String {
     out
 }
 
+/// Frames and hidden units the firmware's passes get for `m`, checked by the same rules as
+/// the compiler will apply (so a model the firmware cannot take fails here, not in its build).
+fn mcu_shape(m: &ModelFile) -> Result<(usize, usize), Failure> {
+    use crate::modelfile::{HOST_MAX_FRAMES, HOST_MAX_HIDDEN};
+    m.with_spec(|spec| {
+        NarxF32::<HOST_MAX_FRAMES, HOST_MAX_HIDDEN>::new(spec)
+            .and_then(|_| NarxQ15::<HOST_MAX_FRAMES, HOST_MAX_HIDDEN>::new(spec))
+            .map(|_| (spec.frames(), spec.hidden))
+            .map_err(|e| Failure {
+                code: 2,
+                message: format!("this model cannot go to the firmware: {e}"),
+            })
+    })
+}
+
 /// Writes the Rust module for `m`; `source` names the model file in the header comment.
 pub fn run(m: &ModelFile, source: &str, w: &mut dyn Write) -> Result<(), Failure> {
+    let (frames, _) = mcu_shape(m)?;
     let n = m.lags().inputs();
     let l = m.lags;
     let target = m.target.column();
@@ -28,21 +47,39 @@ pub fn run(m: &ModelFile, source: &str, w: &mut dyn Write) -> Result<(), Failure
          //! NARMAX model of `{target}`: na={na} nb={nb} nc={nc} nk={nk}, {h} tanh units, \
          sampled every {ts_text} s.\n\
          //! Trained on {data} ({samples} samples, {done} LM epochs, seed {seed}, final \
-         criterion {crit:.4e}).\n\n\
+         criterion {crit:.4e}).\n\
+         //!\n\
+         //! [`F32`] and [`Q15`] are the passes the firmware runs, built from the weights below by\n\
+         //! the compiler (model-core's `const fn`s): checked, laid out and quantised at build time.\n\
+         // Each includer uses part of this (the firmware: the statics; tests: the rest).\n\
+         #![allow(dead_code)]\n\n\
+         use model_core::narmax::mcu::{{to_f32, NarxF32, NarxQ15, NnsysidModel}};\n\
          use model_core::narmax::{{Lags, Narmax, NarmaxError, Scaling}};\n\n\
          /// Regressors, na + nb + nc.\npub const INPUTS: usize = {n};\n\
+         /// Frames of history of the MCU passes, max(na, nk - 1 + nb).\npub const FRAMES: usize = {frames};\n\
          /// Hidden tanh units.\npub const HIDDEN: usize = {h};\n\
          /// Sample period, s.\npub const SAMPLE_PERIOD_S: f32 = {ts:?};\n\
          /// Lags.\npub const LAGS: Lags = Lags {{ na: {na}, nb: {nb}, nc: {nc}, nk: {nk} }};\n\
-         /// W1, {h} rows of {n1} (bias last), row-major.\npub const W1: [f32; {w1n}] = [\n{w1}];\n\
-         /// W2, {h1} (bias last).\npub const W2: [f32; {h1}] = [\n{w2}];\n\
-         /// Torque reference scaling, %.\npub const U_SCALING: Scaling<f32> = Scaling {{ mean: {um:?}, std: {us:?} }};\n\
-         /// Output scaling, {target}.\npub const Y_SCALING: Scaling<f32> = Scaling {{ mean: {ym:?}, std: {ys:?} }};\n\
-         /// Training range of the torque reference, %.\npub const U_RANGE: [f32; 2] = [{u0:?}, {u1:?}];\n\
-         /// Training range of the output, {target}.\npub const Y_RANGE: [f32; 2] = [{y0:?}, {y1:?}];\n\n\
-         /// The model, checked by model-core.\n\
+         /// W1, {h} rows of {n1} (bias last), row-major.\npub const W1: [f64; {w1n}] = [\n{w1}];\n\
+         /// W2, {h1} (bias last).\npub const W2: [f64; {h1}] = [\n{w2}];\n\
+         /// Torque reference scaling, %.\npub const U_SCALING: Scaling<f64> = Scaling {{ mean: {um:?}, std: {us:?} }};\n\
+         /// Output scaling, {target}.\npub const Y_SCALING: Scaling<f64> = Scaling {{ mean: {ym:?}, std: {ys:?} }};\n\
+         /// Training range of the torque reference, %.\npub const U_RANGE: [f64; 2] = [{u0:?}, {u1:?}];\n\
+         /// Training range of the output, {target}.\npub const Y_RANGE: [f64; 2] = [{y0:?}, {y1:?}];\n\n\
+         /// The model in NNSYSID form.\n\
+         pub const MODEL: NnsysidModel<'static> = NnsysidModel {{\n    \
+         lags: LAGS,\n    hidden: HIDDEN,\n    w1: &W1,\n    w2: &W2,\n    u_scale: U_SCALING,\n    \
+         y_scale: Y_SCALING,\n    u_range: U_RANGE,\n    y_range: Y_RANGE,\n}};\n\n\
+         /// The f32 pass.\npub static F32: NarxF32<FRAMES, HIDDEN> = NarxF32::build(&MODEL);\n\
+         /// The Q15 pass.\npub static Q15: NarxQ15<FRAMES, HIDDEN> = NarxQ15::build(&MODEL);\n\n\
+         /// The generic f32 pass (model-core's `Narmax`, `libm::tanhf`): the host's reference and\n\
+         /// the bench's baseline; not in the firmware.\n\
          pub fn model() -> Result<Narmax<f32, INPUTS, HIDDEN>, NarmaxError> {{\n    \
-         Narmax::new(LAGS, HIDDEN, &W1, &W2, U_SCALING, Y_SCALING, U_RANGE, Y_RANGE)\n}}\n",
+         const W1_F32: [f32; {w1n}] = to_f32(&W1);\n    \
+         const W2_F32: [f32; {h1}] = to_f32(&W2);\n    \
+         let s = |s: Scaling<f64>| Scaling {{ mean: s.mean as f32, std: s.std as f32 }};\n    \
+         let r = |r: [f64; 2]| [r[0] as f32, r[1] as f32];\n    \
+         Narmax::new(LAGS, HIDDEN, &W1_F32, &W2_F32, s(U_SCALING), s(Y_SCALING), r(U_RANGE), r(Y_RANGE))\n}}\n",
         na = l.na,
         nb = l.nb,
         nc = l.nc,
@@ -58,16 +95,16 @@ pub fn run(m: &ModelFile, source: &str, w: &mut dyn Write) -> Result<(), Failure
         seed = t.seed,
         crit = t.criterion.last().copied().unwrap_or(f64::NAN),
         w1n = m.hidden * (n + 1),
-        w1 = f32_list(m.w1.iter().flatten().copied()),
-        w2 = f32_list(m.w2.iter().copied()),
-        um = m.u_scaling.mean as f32,
-        us = m.u_scaling.std as f32,
-        ym = m.y_scaling.mean as f32,
-        ys = m.y_scaling.std as f32,
-        u0 = m.u_range[0] as f32,
-        u1 = m.u_range[1] as f32,
-        y0 = m.y_range[0] as f32,
-        y1 = m.y_range[1] as f32,
+        w1 = f64_list(m.w1.iter().flatten().copied()),
+        w2 = f64_list(m.w2.iter().copied()),
+        um = m.u_scaling.mean,
+        us = m.u_scaling.std,
+        ym = m.y_scaling.mean,
+        ys = m.y_scaling.std,
+        u0 = m.u_range[0],
+        u1 = m.u_range[1],
+        y0 = m.y_range[0],
+        y1 = m.y_range[1],
     );
     w.write_all(text.as_bytes()).map_err(|e| Failure {
         code: 1,

@@ -51,7 +51,7 @@ enum Precision {
     F64,
     /// Single precision, as on the MCU.
     F32,
-    /// Fixed point (Q15-class weights and tanh, I16F16 signals), as on the MCU (NARMAX only).
+    /// Fixed point: the firmware's Q15 pass, bit for bit (NARX models only: nc = 0).
     Q15,
 }
 

@@ -3,7 +3,8 @@
 
 use crate::num::Short;
 use crate::Failure;
-use model_core::narmax::{Lags, Narmax, Scaling};
+use model_core::narmax::mcu::{NarxQ15, NnsysidModel};
+use model_core::narmax::{Lags, Narmax, NarmaxError, Scaling};
 use model_core::Real;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -32,8 +33,11 @@ pub const HOST_MAX_INPUTS: usize = 64;
 pub const HOST_MAX_HIDDEN: usize = 32;
 /// A NARMAX model as the host runs it (model-core, generous capacity).
 pub type HostNarmax<T> = Narmax<T, HOST_MAX_INPUTS, HOST_MAX_HIDDEN>;
-/// The fixed-point form of a host model.
-pub type HostNarmaxQ = model_core::narmax::fixed::NarmaxQ<HOST_MAX_INPUTS, HOST_MAX_HIDDEN>;
+/// Capacity of the host's MCU passes: frames of history (model-core's limit).
+pub const HOST_MAX_FRAMES: usize = model_core::narmax::mcu::MAX_FRAMES;
+/// The firmware's Q15 pass of a host model (NARX models only), padded to the host's capacity:
+/// the same arithmetic and bits as the firmware's exact-size pass (zero weights add nothing).
+pub type HostNarxQ15 = NarxQ15<HOST_MAX_FRAMES, HOST_MAX_HIDDEN>;
 
 /// What the model predicts.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
@@ -215,14 +219,40 @@ impl ModelFile {
             ));
         }
         m.build::<f32>().map_err(|e| bad(path, e))?;
-        let f64_model = m.build::<f64>().map_err(|e| bad(path, e))?;
-        HostNarmaxQ::quantize(&f64_model).map_err(|e| {
-            bad(
-                path,
-                format!("cannot be put in fixed point (a weight of 2^30 or more?): {e}"),
-            )
-        })?;
+        m.build::<f64>().map_err(|e| bad(path, e))?;
+        if m.lags.nc == 0 {
+            m.q15().map_err(|e| {
+                bad(
+                    path,
+                    format!("cannot be put in the firmware's fixed point: {e}"),
+                )
+            })?;
+        }
         Ok(m)
+    }
+
+    /// Runs `f` on the model in NNSYSID form (what model-core's MCU passes are built from).
+    pub fn with_spec<R>(&self, f: impl FnOnce(&NnsysidModel) -> R) -> R {
+        let w1: Vec<f64> = self.w1.iter().flatten().copied().collect();
+        let scaling = |s: ScalingFile| Scaling {
+            mean: s.mean,
+            std: s.std,
+        };
+        f(&NnsysidModel {
+            lags: self.lags(),
+            hidden: self.hidden,
+            w1: &w1,
+            w2: &self.w2,
+            u_scale: scaling(self.u_scaling),
+            y_scale: scaling(self.y_scaling),
+            u_range: self.u_range,
+            y_range: self.y_range,
+        })
+    }
+
+    /// The firmware's Q15 pass of this model.
+    pub fn q15(&self) -> Result<HostNarxQ15, NarmaxError> {
+        self.with_spec(HostNarxQ15::new)
     }
 
     /// The model-core model in `T` arithmetic.

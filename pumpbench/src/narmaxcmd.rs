@@ -2,7 +2,7 @@
 
 use crate::input::{read_series, Series};
 use crate::modelfile::{
-    in_firmware_range, HostNarmax, HostNarmaxQ, LagsFile, ModelFile, ScalingFile, Target, Training,
+    in_firmware_range, HostNarmax, HostNarxQ15, LagsFile, ModelFile, ScalingFile, Target, Training,
     FORMAT, MAX_ABS_VALUE,
 };
 use crate::num::Short;
@@ -261,8 +261,8 @@ impl<T: Real> HostModel for HostNarmax<T> {
     }
 }
 
-impl HostModel for HostNarmaxQ {
-    type State = model_core::narmax::fixed::NarmaxQState<{ crate::modelfile::HOST_MAX_INPUTS }>;
+impl HostModel for HostNarxQ15 {
+    type State = model_core::narmax::mcu::NarxQ15State<{ crate::modelfile::HOST_MAX_FRAMES }>;
     fn max_lag(&self) -> usize {
         self.lags().max_lag()
     }
@@ -270,7 +270,7 @@ impl HostModel for HostNarmaxQ {
         self.state_at(u as f32, y as f32)
     }
     fn seed(&self, st: &mut Self::State, u: f64, y: f64) {
-        HostNarmaxQ::seed(self, st, u as f32, y as f32);
+        HostNarxQ15::seed(self, st, u as f32, y as f32);
     }
     fn step(&self, st: &mut Self::State, u: f64) -> (f64, bool) {
         let o = self.simulate_step(st, u as f32);
@@ -330,9 +330,9 @@ pub fn steady_of<M: HostModel>(m: &M, u: f64) -> Result<f64, Failure> {
     })
 }
 
-/// The quantised (fixed-point) host model of a model file.
-pub fn quantized(m: &ModelFile) -> Result<HostNarmaxQ, Failure> {
-    HostNarmaxQ::quantize(&m.build::<f64>().map_err(usage)?).map_err(|e| usage(e.to_string()))
+/// The firmware's Q15 pass of a model file (NARX models only: nc = 0).
+pub fn quantized(m: &ModelFile) -> Result<HostNarxQ15, Failure> {
+    m.q15().map_err(|e| usage(e.to_string()))
 }
 
 /// `simulate --model narmax`.

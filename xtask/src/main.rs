@@ -202,12 +202,14 @@ fn host_replay(header: &str, run_ms: u32) -> Result<Vec<String>> {
     let e = |e: controller::app::AppError| e.to_string();
     let ms = |s: f32| (s * 1000.0 + 0.5) as u32;
     let p = NarmaxModel::new(
-        pressure_model::model().map_err(|e| e.to_string())?,
+        &pressure_model::F32,
+        &pressure_model::Q15,
         ms(pressure_model::SAMPLE_PERIOD_S),
     )
     .map_err(e)?;
     let q = NarmaxModel::new(
-        flow_model::model().map_err(|e| e.to_string())?,
+        &flow_model::F32,
+        &flow_model::Q15,
         ms(flow_model::SAMPLE_PERIOD_S),
     )
     .map_err(e)?;
