@@ -26,7 +26,7 @@
 use crate::analog::{AnalogInput, LoopConfig, Status as InputStatus};
 use crate::scada::{Arithmetic, Mode, Published, Response, ScadaSlave, Status};
 use crate::vfd::{Frame, VfdMap, VfdMaster};
-use model_core::excitation::{PulseTrain, SteppedPulses};
+use model_core::excitation::McuPulses;
 use model_core::monitor::{Monitor, MonitorConfig, MonitorInputs};
 use model_core::narmax::mcu::{NarxF32, NarxF32State, NarxQ15, NarxQ15State};
 use model_core::narmax::{NarmaxError, NarmaxOutput};
@@ -308,7 +308,7 @@ pub struct App<const NP: usize, const HP: usize, const NF: usize, const HF: usiz
     vfd: VfdMaster,
     scada: ScadaSlave,
     profile_seed: u64,
-    profile: Option<SteppedPulses>,
+    profile: Option<McuPulses>,
     t_ms: u32,
     model_fault: bool,
     wb_extrapolating: bool,
@@ -430,8 +430,8 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize> App<NP,
                 let seed = self.profile_seed;
                 let p = self
                     .profile
-                    .get_or_insert_with(|| SteppedPulses::new(PulseTrain::paper(seed), TICK_MS));
-                p.next().map_or(0.0, |(_, u)| u as f32)
+                    .get_or_insert_with(|| McuPulses::paper(seed, TICK_MS));
+                p.next().map_or(0.0, |(_, u)| u)
             }
         }
     }

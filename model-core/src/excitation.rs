@@ -142,6 +142,69 @@ impl Iterator for SteppedPulses {
     }
 }
 
+/// The paper's pulses (amplitudes uniform in 5..85 %, holds uniform in 0.5..3 s) on a grid of
+/// whole-millisecond steps, in f32 and integer arithmetic only: the firmware's built-in
+/// excitation (an MCU without double-precision hardware would otherwise carry software f64).
+/// Yields `(t_ms, torque_ref_pct)` like [`SteppedPulses`], with the same distribution but not
+/// the same sequence: amplitudes take 24 random bits, holds are drawn in whole milliseconds
+/// and rounded to whole steps (at least one).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct McuPulses {
+    rng: SplitMix64,
+    step_ms: u32,
+    t_ms: u32,
+    next_change_ms: u32,
+    torque_ref_pct: f32,
+}
+
+impl McuPulses {
+    /// Lowest amplitude, %.
+    pub const MIN_PCT: f32 = 5.0;
+    /// Highest amplitude (excluded), %.
+    pub const MAX_PCT: f32 = 85.0;
+    /// Shortest hold, ms.
+    pub const MIN_HOLD_MS: u32 = 500;
+    /// Longest hold (excluded), ms.
+    pub const MAX_HOLD_MS: u32 = 3000;
+
+    /// The paper's pulses from `seed`, on steps of `step_ms` (≥ 1) ms.
+    pub const fn paper(seed: u64, step_ms: u32) -> Self {
+        Self {
+            rng: SplitMix64::new(seed),
+            step_ms: if step_ms == 0 { 1 } else { step_ms },
+            t_ms: 0,
+            next_change_ms: 0,
+            torque_ref_pct: 0.0,
+        }
+    }
+
+    /// Next pulse: (torque, %; hold, whole steps ≥ 1).
+    fn draw(&mut self) -> (f32, u32) {
+        let unit = (self.rng.next_u64() >> 40) as f32 * (1.0 / (1u32 << 24) as f32);
+        let pct = Self::MIN_PCT + (Self::MAX_PCT - Self::MIN_PCT) * unit;
+        let span = u64::from(Self::MAX_HOLD_MS - Self::MIN_HOLD_MS);
+        let hold_ms = Self::MIN_HOLD_MS + (((self.rng.next_u64() >> 32) * span) >> 32) as u32;
+        let steps = (hold_ms + self.step_ms / 2) / self.step_ms;
+        (pct, steps.max(1))
+    }
+}
+
+impl Iterator for McuPulses {
+    type Item = (u32, f32);
+    fn next(&mut self) -> Option<(u32, f32)> {
+        if self.t_ms == self.next_change_ms {
+            let (pct, steps) = self.draw();
+            self.torque_ref_pct = pct;
+            self.next_change_ms = self
+                .next_change_ms
+                .checked_add(steps.checked_mul(self.step_ms)?)?;
+        }
+        let t = self.t_ms;
+        self.t_ms = self.t_ms.checked_add(self.step_ms)?;
+        Some((t, self.torque_ref_pct))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -178,6 +241,38 @@ mod tests {
                 t += 2;
             }
         }
+    }
+
+    #[test]
+    fn mcu_pulses_have_the_papers_ranges_and_spread() {
+        let mut p = McuPulses::paper(9, 5);
+        let (mut n, mut mean, mut holds, mut last) = (0u32, 0.0f64, vec![], (0u32, -1.0f32));
+        let mut start = 0;
+        for (t, u) in p.by_ref().take(2_000_000 / 5) {
+            assert_eq!(t % 5, 0);
+            assert!((5.0..85.0).contains(&u), "{u}");
+            if u != last.1 {
+                if last.1 >= 0.0 {
+                    holds.push(t - start);
+                }
+                start = t;
+                n += 1;
+                mean += f64::from(u);
+            }
+            last = (t, u);
+        }
+        mean /= f64::from(n);
+        assert!((mean - 45.0).abs() < 2.0, "mean {mean}");
+        assert!(holds.iter().all(|h| (500..=3000).contains(h) && h % 5 == 0));
+        let hold_mean = holds.iter().map(|&h| f64::from(h)).sum::<f64>() / holds.len() as f64;
+        assert!(
+            (hold_mean - 1750.0).abs() < 60.0,
+            "mean hold {hold_mean} ms"
+        );
+        // Reproducible.
+        let a: Vec<_> = McuPulses::paper(3, 1).take(10_000).collect();
+        let b: Vec<_> = McuPulses::paper(3, 1).take(10_000).collect();
+        assert_eq!(a, b);
     }
 
     #[test]

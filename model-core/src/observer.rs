@@ -898,11 +898,15 @@ struct StepConsts<T> {
 
 impl<T: Real> StepConsts<T> {
     fn new(cfg: &ObserverConfig<T>, dt: T) -> Self {
-        // ≥ 1; dt ≤ MAX_DT_S keeps it ≤ 400.
-        let ratio = (dt / T::from_f64(MAX_SUBSTEP_S)).to_f64();
-        let n = ratio as u32;
-        let substeps = if (n as f64) < ratio { n + 1 } else { n.max(1) };
-        let substep_s = dt / T::from_f64(substeps as f64);
+        // The fewest substeps of at most MAX_SUBSTEP_S, ≥ 1 (dt ≤ MAX_DT_S keeps it ≤ 400),
+        // counted in T: no conversion through f64 (software on the MCU).
+        let max_sub = T::from_f64(MAX_SUBSTEP_S);
+        let (mut substeps, mut n) = (1u32, T::ONE);
+        while n * max_sub < dt && substeps < 400 {
+            substeps += 1;
+            n += T::ONE;
+        }
+        let substep_s = dt / n;
         let decay = |tau: T| {
             if tau > T::ZERO {
                 (-dt / tau).exp()
