@@ -58,11 +58,17 @@ pub struct VfdMap {
     pub retries: u8,
     /// Failed exchanges in a row that raise the link alarm (≥ 1).
     pub fail_limit: u8,
+    /// Shortest time from the start of one exchange to the start of the next, ms: the
+    /// master's cycle. At 19 200 baud a write and its answer take ≈ 9 ms on the line, a read
+    /// of three registers ≈ 10 ms, so 10 ms asks no more than a real link carries; 0 starts
+    /// each exchange as soon as the last one ends.
+    pub cycle_ms: u32,
 }
 
 impl VfdMap {
     /// A drive with 16384 counts = 100 % torque: reference at 0x2000, speed (1 rpm/count),
-    /// torque and status at 0x2100..0x2102; 100 ms timeout, 2 retries, alarm after 3 failures.
+    /// torque and status at 0x2100..0x2102; 100 ms timeout, 2 retries, alarm after 3 failures,
+    /// an exchange every 10 ms at most.
     pub const fn example_16384() -> Self {
         Self {
             unit: 1,
@@ -77,6 +83,7 @@ impl VfdMap {
             timeout_ms: 100,
             retries: 2,
             fail_limit: 3,
+            cycle_ms: 10,
         }
     }
 
@@ -136,6 +143,8 @@ struct Pending {
 pub struct VfdMaster {
     map: VfdMap,
     pending: Option<Pending>,
+    /// When the last exchange started, ms (`None` before the first).
+    last_start_ms: Option<u32>,
     next_is_write: bool,
     /// Failed exchanges in a row, of any kind (a success of either kind resets it).
     failures_in_row: u8,
@@ -160,6 +169,7 @@ impl VfdMaster {
         map.is_valid().then_some(Self {
             map,
             pending: None,
+            last_start_ms: None,
             next_is_write: true,
             failures_in_row: 0,
             write_failures_in_row: 0,
@@ -232,7 +242,8 @@ impl VfdMaster {
         }
     }
 
-    /// Starts the next exchange if none is under way: alternately the torque reference and the
+    /// Starts the next exchange if none is under way and [`VfdMap::cycle_ms`] has passed since
+    /// the last one started: alternately the torque reference and the
     /// read block. During the alarm the reference written is 0 % until one such write is
     /// delivered, then `requested_pct` again: the alarm clears only when the requested
     /// reference itself is delivered, so a drive that takes 0 % but refuses the reference
@@ -243,6 +254,12 @@ impl VfdMaster {
         if self.pending.is_some() {
             return None;
         }
+        if let Some(t) = self.last_start_ms {
+            if now_ms.wrapping_sub(t) < self.map.cycle_ms {
+                return None;
+            }
+        }
+        self.last_start_ms = Some(now_ms);
         let requested = self.map.torque_counts(requested_pct);
         let (kind, delivers_request) = if self.next_is_write {
             // In the alarm: the safe value until the link takes a write, then the request.
@@ -399,6 +416,40 @@ enum Answer {
 mod tests {
     use super::*;
 
+    /// The example map without the cycle: each exchange starts as soon as the last one ends,
+    /// so the tests step the link exchange by exchange.
+    fn unpaced() -> VfdMap {
+        VfdMap {
+            cycle_ms: 0,
+            ..VfdMap::example_16384()
+        }
+    }
+
+    #[test]
+    fn exchanges_start_no_more_often_than_the_cycle() {
+        let mut m = VfdMaster::new(VfdMap::example_16384()).unwrap();
+        let mut out = Frame::new();
+        let mut started = vec![];
+        for t in 0..100u32 {
+            if m.start(t, 50.0, &mut out).is_some() {
+                started.push(t);
+                // The drive answers the write at once (echo) or the read with 3 registers.
+                let mut answer = Frame::new();
+                if out[1] == 6 {
+                    answer.extend_from_slice(&out).unwrap();
+                } else {
+                    let body = [1u8, 3, 6, 0, 100, 0, 50, 0, 1];
+                    answer.extend_from_slice(&body).unwrap();
+                    let crc = crate::scada::crc16(&body);
+                    answer.extend_from_slice(&crc.to_le_bytes()).unwrap();
+                }
+                m.receive(&answer);
+            }
+        }
+        assert_eq!(started, (0..100).step_by(10).collect::<Vec<u32>>());
+        assert!(!m.alarm() && m.readings().is_some());
+    }
+
     fn with_crc(body: &[u8]) -> Vec<u8> {
         let mut f = body.to_vec();
         f.extend_from_slice(&crc16(body).to_le_bytes());
@@ -443,7 +494,7 @@ mod tests {
 
     #[test]
     fn cycles_write_then_read_and_scale() {
-        let mut m = VfdMaster::new(VfdMap::example_16384()).unwrap();
+        let mut m = VfdMaster::new(unpaced()).unwrap();
         let mut d = Drive {
             reference: 999,
             block: [1500, (-4096i16) as u16, 0x0037],
@@ -467,7 +518,7 @@ mod tests {
         exchange(&mut m, &mut d, 20, 50.0);
         assert_eq!(d.reference, 8192);
         assert!(!m.alarm(), "the request delivered");
-        let mut m10 = VfdMap::example_16384();
+        let mut m10 = unpaced();
         m10.counts_per_100_pct = 10_000;
         assert_eq!(m10.torque_counts(50.0), 5000);
         assert_eq!(m10.torque_counts(f32::NAN), 0);
@@ -477,7 +528,7 @@ mod tests {
 
     #[test]
     fn three_failed_exchanges_raise_the_alarm_and_force_zero() {
-        let mut m = VfdMaster::new(VfdMap::example_16384()).unwrap();
+        let mut m = VfdMaster::new(unpaced()).unwrap();
         let mut d = Drive {
             reference: 0,
             block: [0; 3],
@@ -533,7 +584,7 @@ mod tests {
     /// stands, and the output stays at 0 %, until the request itself is delivered.
     #[test]
     fn a_drive_that_refuses_all_but_zero_keeps_the_alarm() {
-        let mut m = VfdMaster::new(VfdMap::example_16384()).unwrap();
+        let mut m = VfdMaster::new(unpaced()).unwrap();
         let mut d = Drive {
             reference: 0,
             block: [0; 3],
@@ -564,7 +615,7 @@ mod tests {
 
     #[test]
     fn exceptions_fail_the_exchange_and_junk_is_ignored() {
-        let mut m = VfdMaster::new(VfdMap::example_16384()).unwrap();
+        let mut m = VfdMaster::new(unpaced()).unwrap();
         let mut d = Drive {
             reference: 0,
             block: [0; 3],
@@ -684,7 +735,7 @@ mod tests {
             Fault::BadReadByteCount,
             Fault::SilentOnReads,
         ] {
-            let mut m = VfdMaster::new(VfdMap::example_16384()).unwrap();
+            let mut m = VfdMaster::new(unpaced()).unwrap();
             let mut d = Drive {
                 reference: 0,
                 block: [1234, 8192, 7],
@@ -721,7 +772,7 @@ mod tests {
     /// configured number of failed exchanges (3: write, read, write), not later.
     #[test]
     fn a_silent_drive_raises_the_alarm_after_fail_limit_exchanges() {
-        let mut m = VfdMaster::new(VfdMap::example_16384()).unwrap();
+        let mut m = VfdMaster::new(unpaced()).unwrap();
         let mut d = Drive {
             reference: 0,
             block: [1234, 8192, 7],
@@ -776,6 +827,7 @@ mod tests {
             },
             VfdMap {
                 fail_limit: 0,
+                cycle_ms: 10,
                 ..ok
             },
         ] {

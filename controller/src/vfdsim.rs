@@ -142,7 +142,7 @@ mod tests {
             };
             let (mut req, mut ans) = (Frame::new(), Frame::new());
             for t in 0..4 {
-                m.start(t, 50.0, &mut req).unwrap();
+                m.start(t * map.cycle_ms, 50.0, &mut req).unwrap();
                 sim.handle(&req, &values, &mut ans).unwrap();
                 m.receive(&ans);
             }
