@@ -26,7 +26,8 @@ pub const STEADY_SCAN_STEP_RPM: f64 = 25.0;
 /// Fixed-step integration scheme; the torque reference is held over a step.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Scheme {
-    /// Classic 4th-order Runge-Kutta: 3 flow solves per step plus 1 for the new state.
+    /// Classic 4th-order Runge-Kutta: 3 flow solves per step plus 1 for the new state, each
+    /// warm-started from the previous one (stage 4 from a linear extrapolation).
     #[default]
     Rk4,
     /// Heun (explicit trapezoid, 2nd order): 1 + 1 flow solves per step.
@@ -248,25 +249,29 @@ impl<T: Real> WhiteBox<T> {
         let q0 = self.current_flow(state);
         let k1 = self.derivative(te, w0, q0);
         let half = T::from_f64(0.5);
-        let increment = match scheme {
-            Scheme::Euler => h * k1,
+        // Each flow solve is warm-started from the flow at the nearest speed solved so far;
+        // `near` is the one closest to the new speed.
+        let (increment, near) = match scheme {
+            Scheme::Euler => (h * k1, q0),
             Scheme::Heun => {
-                let (_, k2) = self.stage(te, w0 + h * k1, q0);
-                h * half * (k1 + k2)
+                let (q2, k2) = self.stage(te, w0 + h * k1, q0);
+                (h * half * (k1 + k2), q2)
             }
             Scheme::Rk4 => {
                 let (q2, k2) = self.stage(te, w0 + half * h * k1, q0);
                 let (q3, k3) = self.stage(te, w0 + half * h * k2, q2);
-                let (_, k4) = self.stage(te, w0 + h * k3, q3);
+                // Stage 4's speed is about twice as far from w0 as stage 3's (h k3 against
+                // h k2 / 2): extrapolate the flow linearly (a non-positive guess is ignored).
+                let (q4, k4) = self.stage(te, w0 + h * k3, q3 + (q3 - q0));
                 let two = T::from_f64(2.0);
-                h / T::from_f64(6.0) * (k1 + two * (k2 + k3) + k4)
+                (h / T::from_f64(6.0) * (k1 + two * (k2 + k3) + k4), q4)
             }
         };
         // Kahan-compensated update of the speed.
         let y = increment - state.speed_carry_rpm;
         let w1 = w0 + y;
         let carry = (w1 - w0) - y;
-        let q1 = self.flow_at(w1, q0);
+        let q1 = self.flow_at(w1, near);
         if !w1.is_finite() || !q1.is_finite() || !carry.is_finite() {
             return Err(BenchError::Diverged);
         }
