@@ -5,7 +5,7 @@ use crate::equations::{
     speed_derivative_rpm_per_s, valve_pressure_mca, CubicInFlow,
 };
 use crate::error::BenchError;
-use crate::flow::{balance_cubic, solve_flow};
+use crate::flow::solve_flow;
 use crate::params::{
     BenchParams, FITTED_FLOW_MAX_LPS, FITTED_SPEED_MAX_RPM, FITTED_SPEED_MIN_RPM, RPM_PER_RAD_S,
 };
@@ -114,8 +114,20 @@ pub struct WhiteBox<T> {
     system_k: T,
     /// rpm/s per % of torque surplus.
     accel: T,
+    /// α1..α10 with the load folded in (α5 − k1 − k2², α10 + c): the flow-balance cubic
+    /// `g(ω, Q)` in the layout of eq. (5), mca.
+    balance_poly: [T; 10],
     /// Incremented by every load change, so a state's flow is re-solved after one.
     load_generation: u32,
+}
+
+/// α with the load folded in: the flow balance `F_H(ω, Q) − k Q² + c` as one polynomial.
+#[inline]
+fn balance_poly<T: Real>(alpha: &[T; 10], system_k: T, static_head_c_mca: T) -> [T; 10] {
+    let mut p = *alpha;
+    p[4] = p[4] - system_k;
+    p[9] += static_head_c_mca;
+    p
 }
 
 impl<T: Real> WhiteBox<T> {
@@ -131,10 +143,11 @@ impl<T: Real> WhiteBox<T> {
     }
 
     fn from_valid(params: BenchParams<T>) -> Self {
-        let accel = params.accel_rpm_per_s_per_pct();
+        let system_k = params.pipe_k1 + params.valve_k2 * params.valve_k2;
         Self {
-            system_k: params.pipe_k1 + params.valve_k2 * params.valve_k2,
-            accel,
+            system_k,
+            accel: params.accel_rpm_per_s_per_pct(),
+            balance_poly: balance_poly(&params.alpha, system_k, params.static_head_c_mca),
             params,
             load_generation: 0,
         }
@@ -165,6 +178,7 @@ impl<T: Real> WhiteBox<T> {
         self.params.valve_k2 = valve_k2;
         self.params.static_head_c_mca = static_head_c_mca;
         self.system_k = self.params.pipe_k1 + valve_k2 * valve_k2;
+        self.balance_poly = balance_poly(&self.params.alpha, self.system_k, static_head_c_mca);
         self.load_generation = self.load_generation.wrapping_add(1);
         Ok(())
     }
@@ -175,15 +189,11 @@ impl<T: Real> WhiteBox<T> {
         solve_flow(&self.balance(speed_rpm), warm_start_lps).flow_lps
     }
 
-    /// The flow-balance cubic at `speed_rpm` (see [`crate::flow`]).
+    /// The flow-balance cubic at `speed_rpm` (see [`crate::flow`]; the same as
+    /// [`crate::flow::balance_cubic`] up to rounding: the load is folded into α beforehand).
     #[inline]
     pub fn balance(&self, speed_rpm: T) -> CubicInFlow<T> {
-        balance_cubic(
-            &self.params.alpha,
-            self.system_k,
-            self.params.static_head_c_mca,
-            speed_rpm,
-        )
+        CubicInFlow::from_poly(&self.balance_poly, speed_rpm)
     }
 
     /// Checks a torque reference: finite and within 0..=100 %.
