@@ -107,6 +107,41 @@ pub struct Signals<T> {
 }
 
 /// The white-box bench model (coefficients only; the state is a separate [`BenchState`]).
+///
+/// [`WhiteBox::new`] validates a parameter set at run time; for f32 and f64 the paper's bench
+/// is also a `const` (`WhiteBox::<f32>::PAPER`, what [`WhiteBox::paper`] returns) and
+/// `WhiteBox::<f32>::new_const` builds one at compile time, where a parameter set that fails
+/// validation is a build error:
+///
+/// ```
+/// use model_core::{BenchParams, WhiteBox};
+/// const HEAVIER: BenchParams<f32> = {
+///     let mut p = BenchParams::<f32>::PAPER;
+///     p.inertia_kg_m2 = 0.1; // kg·m²
+///     p
+/// };
+/// const BENCH: WhiteBox<f32> = match WhiteBox::<f32>::new_const(HEAVIER) {
+///     Ok(bench) => bench,
+///     Err(_) => panic!("invalid bench parameters"),
+/// };
+/// assert!(BENCH.accel_rpm_per_s_per_pct() < WhiteBox::<f32>::PAPER.accel_rpm_per_s_per_pct());
+/// ```
+///
+/// The same with a zero inertia does not build:
+///
+/// ```compile_fail
+/// use model_core::{BenchParams, WhiteBox};
+/// const HEAVIER: BenchParams<f32> = {
+///     let mut p = BenchParams::<f32>::PAPER;
+///     p.inertia_kg_m2 = 0.0; // kg·m²
+///     p
+/// };
+/// const BENCH: WhiteBox<f32> = match WhiteBox::<f32>::new_const(HEAVIER) {
+///     Ok(bench) => bench,
+///     Err(_) => panic!("invalid bench parameters"),
+/// };
+/// assert!(BENCH.accel_rpm_per_s_per_pct() < WhiteBox::<f32>::PAPER.accel_rpm_per_s_per_pct());
+/// ```
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct WhiteBox<T> {
     params: BenchParams<T>,
@@ -130,6 +165,47 @@ fn balance_poly<T: Real>(alpha: &[T; 10], system_k: T, static_head_c_mca: T) -> 
     p
 }
 
+/// `const fn` constructors for one concrete scalar type (generic `const fn` arithmetic is not
+/// possible on stable): the same operations in the same order as [`WhiteBox::new`], so the
+/// same bench (a test holds them equal).
+macro_rules! const_white_box {
+    ($t:ty) => {
+        impl WhiteBox<$t> {
+            /// The paper's bench ([`BenchParams::paper`] in this type), built at compile time:
+            /// no arithmetic at run time, and a build error if its parameters failed
+            /// validation.
+            pub const PAPER: Self = match Self::new_const(BenchParams::<$t>::PAPER) {
+                Ok(bench) => bench,
+                Err(BenchError::InvalidParameter(why)) => panic!("{}", why),
+                Err(_) => panic!("invalid parameters"),
+            };
+
+            /// [`WhiteBox::new`] as a `const fn`: validates `params`
+            /// (`BenchParams::validate_const`) and builds the model. In a `const` item, match
+            /// the result and `panic!` on an error to make a bad parameter set a build error.
+            pub const fn new_const(params: BenchParams<$t>) -> Result<Self, BenchError> {
+                if let Err(e) = params.validate_const() {
+                    return Err(e);
+                }
+                let system_k = params.pipe_k1 + params.valve_k2 * params.valve_k2;
+                let mut balance_poly = params.alpha;
+                balance_poly[4] = balance_poly[4] - system_k;
+                balance_poly[9] += params.static_head_c_mca;
+                Ok(Self {
+                    system_k,
+                    accel: params.accel_const(),
+                    balance_poly,
+                    params,
+                    load_generation: 0,
+                })
+            }
+        }
+    };
+}
+
+const_white_box!(f32);
+const_white_box!(f64);
+
 impl<T: Real> WhiteBox<T> {
     /// Validates `params` and builds the model.
     pub fn new(params: BenchParams<T>) -> Result<Self, BenchError> {
@@ -137,9 +213,11 @@ impl<T: Real> WhiteBox<T> {
         Ok(Self::from_valid(params))
     }
 
-    /// The paper's bench (its parameters pass validation: tested in `paper_parameters_validate`).
+    /// The paper's bench: a copy of compile-time data (`WhiteBox::<f32>::PAPER` or
+    /// `WhiteBox::<f64>::PAPER`), nothing computed at run time.
+    #[inline]
     pub fn paper() -> Self {
-        Self::from_valid(BenchParams::paper())
+        T::PAPER_BENCH
     }
 
     fn from_valid(params: BenchParams<T>) -> Self {
@@ -467,6 +545,36 @@ mod tests {
         assert!(WhiteBox::new(p).is_err());
         p = BenchParams::paper();
         p.beta[3] = f64::NAN;
+        assert!(WhiteBox::new(p).is_err());
+    }
+
+    #[test]
+    fn const_benches_equal_the_run_time_ones() {
+        assert_eq!(
+            WhiteBox::new(BenchParams::<f32>::PAPER),
+            Ok(WhiteBox::<f32>::PAPER)
+        );
+        assert_eq!(
+            WhiteBox::new(BenchParams::<f64>::PAPER),
+            Ok(WhiteBox::<f64>::PAPER)
+        );
+        assert_eq!(WhiteBox::<f32>::paper(), WhiteBox::<f32>::PAPER);
+        assert_eq!(WhiteBox::<f64>::paper(), WhiteBox::<f64>::PAPER);
+        // Another set (the virtual bench's kind of change) and a load change after it.
+        let mut p = BenchParams::<f32>::PAPER;
+        p.inertia_kg_m2 *= 1.05;
+        p.valve_k2 *= 1.02;
+        let (mut at_build, mut at_run) = (
+            WhiteBox::<f32>::new_const(p).unwrap(),
+            WhiteBox::new(p).unwrap(),
+        );
+        assert_eq!(at_build, at_run);
+        assert_ne!(at_build, WhiteBox::<f32>::PAPER);
+        at_build.set_load(0.09, 0.3).unwrap();
+        at_run.set_load(0.09, 0.3).unwrap();
+        assert_eq!(at_build, at_run);
+        p.alpha[0] = 0.0;
+        assert_eq!(WhiteBox::<f32>::new_const(p), WhiteBox::new(p));
         assert!(WhiteBox::new(p).is_err());
     }
 
