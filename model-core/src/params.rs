@@ -51,7 +51,9 @@ pub const PAPER_INERTIA_KG_M2: f64 = 0.08872;
 /// Coefficients and constants of the white-box bench (immutable configuration).
 ///
 /// Build with [`BenchParams::paper`], change fields if needed, then hand it to
-/// [`crate::WhiteBox::new`], which validates it.
+/// [`crate::WhiteBox::new`], which validates it. For f32 and f64 the paper's set is also a
+/// `const` (`BenchParams::<f32>::PAPER`), and `validate_const` / `WhiteBox::new_const` do
+/// the same at compile time.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct BenchParams<T> {
     /// γ1..γ6 of eq. (4), % of nominal torque per %^(5..0).
@@ -72,35 +74,21 @@ pub struct BenchParams<T> {
     pub nominal_torque_nm: T,
 }
 
-fn conv<T: Real, const N: usize>(a: &[f64; N]) -> [T; N] {
-    let mut out = [T::ZERO; N];
-    for (o, &x) in out.iter_mut().zip(a.iter()) {
-        *o = T::from_f64(x);
-    }
-    out
-}
-
 impl<T: Real> BenchParams<T> {
-    /// The paper's coefficients (as printed), rounded to `T`.
+    /// The paper's coefficients (as printed), rounded to `T`: a copy of compile-time data
+    /// (`BenchParams::<f64>::PAPER` or `BenchParams::<f32>::PAPER`), no arithmetic at run
+    /// time.
+    #[inline]
     pub fn paper() -> Self {
-        Self {
-            gamma: conv(&PAPER_GAMMA),
-            alpha: conv(&PAPER_ALPHA),
-            beta: conv(&PAPER_BETA),
-            pipe_k1: T::from_f64(PAPER_K1),
-            valve_k2: T::from_f64(PAPER_K2),
-            static_head_c_mca: T::from_f64(PAPER_C_MCA),
-            inertia_kg_m2: T::from_f64(PAPER_INERTIA_KG_M2),
-            nominal_torque_nm: T::from_f64(NOMINAL_TORQUE_NM),
-        }
+        *T::PAPER_BENCH.params()
     }
 
     /// rpm/s of speed change per % of torque surplus: `(T_nom / 100) / J · 30/π` (≈ 42.95
-    /// with the paper's J and T_nom), computed in f64 and rounded once.
+    /// with the paper's J and T_nom), computed in `T` (in f32 within 2 ulps of the exact
+    /// value; no f64 arithmetic on an f32 target). Gives what [`Self::accel_const`] gives.
     pub fn accel_rpm_per_s_per_pct(&self) -> T {
-        T::from_f64(
-            self.nominal_torque_nm.to_f64() / 100.0 / self.inertia_kg_m2.to_f64() * RPM_PER_RAD_S,
-        )
+        self.nominal_torque_nm / T::from_f64(100.0) / self.inertia_kg_m2
+            * T::from_f64(RPM_PER_RAD_S)
     }
 
     /// Checks every value: all finite, α1 < 0 (the pump head falls at high flow, so the flow
@@ -139,8 +127,189 @@ impl<T: Real> BenchParams<T> {
     }
 }
 
+impl BenchParams<f64> {
+    /// The paper's coefficients as printed ([`PAPER_GAMMA`], [`PAPER_ALPHA`], [`PAPER_BETA`],
+    /// [`PAPER_K1`], [`PAPER_K2`], [`PAPER_C_MCA`], [`PAPER_INERTIA_KG_M2`],
+    /// [`NOMINAL_TORQUE_NM`]; units as in the fields): compile-time data.
+    pub const PAPER: Self = Self {
+        gamma: PAPER_GAMMA,
+        alpha: PAPER_ALPHA,
+        beta: PAPER_BETA,
+        pipe_k1: PAPER_K1,
+        valve_k2: PAPER_K2,
+        static_head_c_mca: PAPER_C_MCA,
+        inertia_kg_m2: PAPER_INERTIA_KG_M2,
+        nominal_torque_nm: NOMINAL_TORQUE_NM,
+    };
+
+    /// Every value rounded to the nearest f32 (units unchanged); a `const fn`, so a `const`
+    /// built with it holds f32 data and the target does no f64 arithmetic for it.
+    pub const fn to_f32(&self) -> BenchParams<f32> {
+        BenchParams {
+            gamma: round_to_f32(&self.gamma),
+            alpha: round_to_f32(&self.alpha),
+            beta: round_to_f32(&self.beta),
+            pipe_k1: self.pipe_k1 as f32,
+            valve_k2: self.valve_k2 as f32,
+            static_head_c_mca: self.static_head_c_mca as f32,
+            inertia_kg_m2: self.inertia_kg_m2 as f32,
+            nominal_torque_nm: self.nominal_torque_nm as f32,
+        }
+    }
+}
+
+impl BenchParams<f32> {
+    /// The paper's coefficients rounded to f32 (`BenchParams::<f64>::PAPER.to_f32()`, units
+    /// as in the fields): compile-time data.
+    pub const PAPER: Self = BenchParams::<f64>::PAPER.to_f32();
+}
+
+/// Each element rounded to the nearest f32, at compile time when used in a `const`.
+const fn round_to_f32<const N: usize>(a: &[f64; N]) -> [f32; N] {
+    let mut out = [0.0f32; N];
+    let mut i = 0;
+    while i < N {
+        out[i] = a[i] as f32;
+        i += 1;
+    }
+    out
+}
+
+/// `const fn` twins of [`BenchParams::validate`] and [`BenchParams::accel_rpm_per_s_per_pct`]
+/// for one concrete scalar type (generic `const fn` arithmetic is not possible on stable).
+macro_rules! const_bench_params {
+    ($t:ty) => {
+        impl BenchParams<$t> {
+            /// [`Self::validate`] as a `const fn`: the same rules, the same errors (a test
+            /// holds them equal). A `const` item that turns an error into a `panic!` makes a
+            /// bad parameter set a build error (see [`crate::WhiteBox`]).
+            pub const fn validate_const(&self) -> Result<(), BenchError> {
+                const fn all_finite<const N: usize>(a: &[$t; N]) -> bool {
+                    let mut i = 0;
+                    while i < N {
+                        if !a[i].is_finite() {
+                            return false;
+                        }
+                        i += 1;
+                    }
+                    true
+                }
+                let scalars = [
+                    self.pipe_k1,
+                    self.valve_k2,
+                    self.static_head_c_mca,
+                    self.inertia_kg_m2,
+                    self.nominal_torque_nm,
+                ];
+                if !all_finite(&self.gamma)
+                    || !all_finite(&self.alpha)
+                    || !all_finite(&self.beta)
+                    || !all_finite(&scalars)
+                {
+                    return Err(BenchError::InvalidParameter("non-finite coefficient"));
+                }
+                if !(self.alpha[0] < 0.0) {
+                    return Err(BenchError::InvalidParameter("alpha1 must be negative"));
+                }
+                if self.pipe_k1 < 0.0 || self.valve_k2 < 0.0 {
+                    return Err(BenchError::InvalidParameter("k1 and k2 must be >= 0"));
+                }
+                if !(self.inertia_kg_m2 > 0.0) || !(self.nominal_torque_nm > 0.0) {
+                    return Err(BenchError::InvalidParameter(
+                        "inertia and nominal torque must be > 0",
+                    ));
+                }
+                Ok(())
+            }
+
+            /// [`Self::accel_rpm_per_s_per_pct`] as a `const fn` (rpm/s per %): the same
+            /// operations in the same order, so the same value.
+            pub const fn accel_const(&self) -> $t {
+                self.nominal_torque_nm / 100.0 / self.inertia_kg_m2 * (RPM_PER_RAD_S as $t)
+            }
+        }
+    };
+}
+
 impl<T: Real> Default for BenchParams<T> {
     fn default() -> Self {
         Self::paper()
+    }
+}
+
+const_bench_params!(f32);
+const_bench_params!(f64);
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn f32_paper_is_the_f64_one_rounded() {
+        let p = BenchParams::<f32>::PAPER;
+        assert_eq!(p.gamma, PAPER_GAMMA.map(|x| x as f32));
+        assert_eq!(p.alpha, PAPER_ALPHA.map(|x| x as f32));
+        assert_eq!(p.beta, PAPER_BETA.map(|x| x as f32));
+        let scalars = [p.pipe_k1, p.valve_k2, p.static_head_c_mca, p.inertia_kg_m2];
+        let printed = [PAPER_K1, PAPER_K2, PAPER_C_MCA, PAPER_INERTIA_KG_M2];
+        assert_eq!(scalars, printed.map(|x| x as f32));
+        assert_eq!(p.nominal_torque_nm, NOMINAL_TORQUE_NM as f32);
+        assert_eq!(BenchParams::<f32>::paper(), p);
+        assert_eq!(BenchParams::<f64>::paper(), BenchParams::<f64>::PAPER);
+        assert_eq!(BenchParams::<f64>::PAPER.gamma, PAPER_GAMMA);
+    }
+
+    /// `validate_const` gives what `validate` gives, valid or not.
+    fn const_validation_is_validate<T: Real>(
+        validate_const: fn(&BenchParams<T>) -> Result<(), BenchError>,
+    ) {
+        let changes: [fn(&mut BenchParams<T>); 15] = [
+            |_| {},
+            |p| p.alpha[0] = T::from_f64(1e-3),
+            |p| p.alpha[0] = T::ZERO,
+            |p| p.alpha[0] = T::from_f64(f64::NAN),
+            |p| p.inertia_kg_m2 = T::ZERO,
+            |p| p.inertia_kg_m2 = T::from_f64(-1.0),
+            |p| p.nominal_torque_nm = T::ZERO,
+            |p| p.pipe_k1 = T::from_f64(-1.0),
+            |p| p.valve_k2 = T::from_f64(-1e-9),
+            |p| p.valve_k2 = T::ZERO,
+            |p| p.beta[3] = T::from_f64(f64::NAN),
+            |p| p.gamma[5] = T::from_f64(f64::INFINITY),
+            |p| p.static_head_c_mca = T::from_f64(f64::NEG_INFINITY),
+            |p| p.static_head_c_mca = T::from_f64(-3.0),
+            |p| p.pipe_k1 = T::from_f64(f64::NAN),
+        ];
+        let mut errors = 0;
+        for (i, change) in changes.iter().enumerate() {
+            let mut p = BenchParams::<T>::paper();
+            change(&mut p);
+            assert_eq!(validate_const(&p), p.validate(), "change {i}");
+            errors += usize::from(p.validate().is_err());
+        }
+        assert_eq!(errors, 12);
+    }
+
+    #[test]
+    fn const_validation_is_validate_f32_and_f64() {
+        const_validation_is_validate::<f32>(BenchParams::<f32>::validate_const);
+        const_validation_is_validate::<f64>(BenchParams::<f64>::validate_const);
+    }
+
+    #[test]
+    fn accel_in_f32_is_within_two_ulps_of_f64() {
+        for factor in [1.0f32, 1.05, 0.9, 3.0] {
+            let mut p = BenchParams::<f32>::PAPER;
+            p.inertia_kg_m2 *= factor;
+            let exact =
+                f64::from(p.nominal_torque_nm) / 100.0 / f64::from(p.inertia_kg_m2) * RPM_PER_RAD_S;
+            let a = p.accel_rpm_per_s_per_pct();
+            assert_eq!(a, p.accel_const());
+            let ulps = (f64::from(a) - exact).abs() / f64::from(f32::EPSILON * a);
+            assert!(ulps <= 2.0, "J × {factor}: {ulps} ulps");
+        }
+        let p = BenchParams::<f64>::PAPER;
+        assert_eq!(p.accel_rpm_per_s_per_pct(), p.accel_const());
+        assert!((p.accel_const() - 42.946).abs() < 1e-3);
     }
 }

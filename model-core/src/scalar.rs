@@ -7,6 +7,7 @@
 //! it when the flow-balance cubic is not monotone, which never happens with the paper's
 //! coefficients inside the fitted range (see [`crate::flow`]).
 
+use crate::whitebox::WhiteBox;
 use core::fmt::Debug;
 use core::ops::{Add, AddAssign, Div, Mul, Neg, Sub};
 
@@ -46,9 +47,14 @@ pub trait Real:
     fn tanh(self) -> Self;
     /// Exponential (`libm`).
     fn exp(self) -> Self;
+    /// The paper's white-box bench in this type (`WhiteBox::<f32>::PAPER`,
+    /// `WhiteBox::<f64>::PAPER`): compile-time data, behind [`WhiteBox::paper`] and
+    /// [`crate::BenchParams::paper`].
+    const PAPER_BENCH: WhiteBox<Self>;
 }
 
 impl Real for f32 {
+    const PAPER_BENCH: WhiteBox<Self> = WhiteBox::<f32>::PAPER;
     const ZERO: Self = 0.0;
     const ONE: Self = 1.0;
     const EPSILON: Self = f32::EPSILON;
@@ -91,6 +97,7 @@ impl Real for f32 {
 }
 
 impl Real for f64 {
+    const PAPER_BENCH: WhiteBox<Self> = WhiteBox::<f64>::PAPER;
     const ZERO: Self = 0.0;
     const ONE: Self = 1.0;
     const EPSILON: Self = f64::EPSILON;

@@ -5,7 +5,7 @@ use crate::equations::{
     speed_derivative_rpm_per_s, valve_pressure_mca, CubicInFlow,
 };
 use crate::error::BenchError;
-use crate::flow::{balance_cubic, solve_flow};
+use crate::flow::solve_flow;
 use crate::params::{
     BenchParams, FITTED_FLOW_MAX_LPS, FITTED_SPEED_MAX_RPM, FITTED_SPEED_MIN_RPM, RPM_PER_RAD_S,
 };
@@ -26,7 +26,8 @@ pub const STEADY_SCAN_STEP_RPM: f64 = 25.0;
 /// Fixed-step integration scheme; the torque reference is held over a step.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Scheme {
-    /// Classic 4th-order Runge-Kutta: 3 flow solves per step plus 1 for the new state.
+    /// Classic 4th-order Runge-Kutta: 3 flow solves per step plus 1 for the new state, each
+    /// warm-started from the previous one (stage 4 from a linear extrapolation).
     #[default]
     Rk4,
     /// Heun (explicit trapezoid, 2nd order): 1 + 1 flow solves per step.
@@ -106,6 +107,41 @@ pub struct Signals<T> {
 }
 
 /// The white-box bench model (coefficients only; the state is a separate [`BenchState`]).
+///
+/// [`WhiteBox::new`] validates a parameter set at run time; for f32 and f64 the paper's bench
+/// is also a `const` (`WhiteBox::<f32>::PAPER`, what [`WhiteBox::paper`] returns) and
+/// `WhiteBox::<f32>::new_const` builds one at compile time, where a parameter set that fails
+/// validation is a build error:
+///
+/// ```
+/// use model_core::{BenchParams, WhiteBox};
+/// const HEAVIER: BenchParams<f32> = {
+///     let mut p = BenchParams::<f32>::PAPER;
+///     p.inertia_kg_m2 = 0.1; // kg·m²
+///     p
+/// };
+/// const BENCH: WhiteBox<f32> = match WhiteBox::<f32>::new_const(HEAVIER) {
+///     Ok(bench) => bench,
+///     Err(_) => panic!("invalid bench parameters"),
+/// };
+/// assert!(BENCH.accel_rpm_per_s_per_pct() < WhiteBox::<f32>::PAPER.accel_rpm_per_s_per_pct());
+/// ```
+///
+/// The same with a zero inertia does not build:
+///
+/// ```compile_fail
+/// use model_core::{BenchParams, WhiteBox};
+/// const HEAVIER: BenchParams<f32> = {
+///     let mut p = BenchParams::<f32>::PAPER;
+///     p.inertia_kg_m2 = 0.0; // kg·m²
+///     p
+/// };
+/// const BENCH: WhiteBox<f32> = match WhiteBox::<f32>::new_const(HEAVIER) {
+///     Ok(bench) => bench,
+///     Err(_) => panic!("invalid bench parameters"),
+/// };
+/// assert!(BENCH.accel_rpm_per_s_per_pct() < WhiteBox::<f32>::PAPER.accel_rpm_per_s_per_pct());
+/// ```
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct WhiteBox<T> {
     params: BenchParams<T>,
@@ -113,9 +149,62 @@ pub struct WhiteBox<T> {
     system_k: T,
     /// rpm/s per % of torque surplus.
     accel: T,
+    /// α1..α10 with the load folded in (α5 − k1 − k2², α10 + c): the flow-balance cubic
+    /// `g(ω, Q)` in the layout of eq. (5), mca.
+    balance_poly: [T; 10],
     /// Incremented by every load change, so a state's flow is re-solved after one.
     load_generation: u32,
 }
+
+/// α with the load folded in: the flow balance `F_H(ω, Q) − k Q² + c` as one polynomial.
+#[inline]
+fn balance_poly<T: Real>(alpha: &[T; 10], system_k: T, static_head_c_mca: T) -> [T; 10] {
+    let mut p = *alpha;
+    p[4] = p[4] - system_k;
+    p[9] += static_head_c_mca;
+    p
+}
+
+/// `const fn` constructors for one concrete scalar type (generic `const fn` arithmetic is not
+/// possible on stable): the same operations in the same order as [`WhiteBox::new`], so the
+/// same bench (a test holds them equal).
+macro_rules! const_white_box {
+    ($t:ty) => {
+        impl WhiteBox<$t> {
+            /// The paper's bench ([`BenchParams::paper`] in this type), built at compile time:
+            /// no arithmetic at run time, and a build error if its parameters failed
+            /// validation.
+            pub const PAPER: Self = match Self::new_const(BenchParams::<$t>::PAPER) {
+                Ok(bench) => bench,
+                Err(BenchError::InvalidParameter(why)) => panic!("{}", why),
+                Err(_) => panic!("invalid parameters"),
+            };
+
+            /// [`WhiteBox::new`] as a `const fn`: validates `params`
+            /// (`BenchParams::validate_const`) and builds the model. In a `const` item, match
+            /// the result and `panic!` on an error to make a bad parameter set a build error.
+            pub const fn new_const(params: BenchParams<$t>) -> Result<Self, BenchError> {
+                if let Err(e) = params.validate_const() {
+                    return Err(e);
+                }
+                let system_k = params.pipe_k1 + params.valve_k2 * params.valve_k2;
+                let mut balance_poly = params.alpha;
+                balance_poly[4] = balance_poly[4] - system_k;
+                balance_poly[9] += params.static_head_c_mca;
+                Ok(Self {
+                    system_k,
+                    accel: params.accel_const(),
+                    balance_poly,
+                    params,
+                    load_generation: 0,
+                })
+            }
+        }
+    };
+}
+
+const_white_box!(f32);
+const_white_box!(f64);
 
 impl<T: Real> WhiteBox<T> {
     /// Validates `params` and builds the model.
@@ -124,16 +213,19 @@ impl<T: Real> WhiteBox<T> {
         Ok(Self::from_valid(params))
     }
 
-    /// The paper's bench (its parameters pass validation: tested in `paper_parameters_validate`).
+    /// The paper's bench: a copy of compile-time data (`WhiteBox::<f32>::PAPER` or
+    /// `WhiteBox::<f64>::PAPER`), nothing computed at run time.
+    #[inline]
     pub fn paper() -> Self {
-        Self::from_valid(BenchParams::paper())
+        T::PAPER_BENCH
     }
 
     fn from_valid(params: BenchParams<T>) -> Self {
-        let accel = params.accel_rpm_per_s_per_pct();
+        let system_k = params.pipe_k1 + params.valve_k2 * params.valve_k2;
         Self {
-            system_k: params.pipe_k1 + params.valve_k2 * params.valve_k2,
-            accel,
+            system_k,
+            accel: params.accel_rpm_per_s_per_pct(),
+            balance_poly: balance_poly(&params.alpha, system_k, params.static_head_c_mca),
             params,
             load_generation: 0,
         }
@@ -164,6 +256,7 @@ impl<T: Real> WhiteBox<T> {
         self.params.valve_k2 = valve_k2;
         self.params.static_head_c_mca = static_head_c_mca;
         self.system_k = self.params.pipe_k1 + valve_k2 * valve_k2;
+        self.balance_poly = balance_poly(&self.params.alpha, self.system_k, static_head_c_mca);
         self.load_generation = self.load_generation.wrapping_add(1);
         Ok(())
     }
@@ -174,15 +267,11 @@ impl<T: Real> WhiteBox<T> {
         solve_flow(&self.balance(speed_rpm), warm_start_lps).flow_lps
     }
 
-    /// The flow-balance cubic at `speed_rpm` (see [`crate::flow`]).
+    /// The flow-balance cubic at `speed_rpm` (see [`crate::flow`]; the same as
+    /// [`crate::flow::balance_cubic`] up to rounding: the load is folded into α beforehand).
     #[inline]
     pub fn balance(&self, speed_rpm: T) -> CubicInFlow<T> {
-        balance_cubic(
-            &self.params.alpha,
-            self.system_k,
-            self.params.static_head_c_mca,
-            speed_rpm,
-        )
+        CubicInFlow::from_poly(&self.balance_poly, speed_rpm)
     }
 
     /// Checks a torque reference: finite and within 0..=100 %.
@@ -248,25 +337,29 @@ impl<T: Real> WhiteBox<T> {
         let q0 = self.current_flow(state);
         let k1 = self.derivative(te, w0, q0);
         let half = T::from_f64(0.5);
-        let increment = match scheme {
-            Scheme::Euler => h * k1,
+        // Each flow solve is warm-started from the flow at the nearest speed solved so far;
+        // `near` is the one closest to the new speed.
+        let (increment, near) = match scheme {
+            Scheme::Euler => (h * k1, q0),
             Scheme::Heun => {
-                let (_, k2) = self.stage(te, w0 + h * k1, q0);
-                h * half * (k1 + k2)
+                let (q2, k2) = self.stage(te, w0 + h * k1, q0);
+                (h * half * (k1 + k2), q2)
             }
             Scheme::Rk4 => {
                 let (q2, k2) = self.stage(te, w0 + half * h * k1, q0);
                 let (q3, k3) = self.stage(te, w0 + half * h * k2, q2);
-                let (_, k4) = self.stage(te, w0 + h * k3, q3);
+                // Stage 4's speed is about twice as far from w0 as stage 3's (h k3 against
+                // h k2 / 2): extrapolate the flow linearly (a non-positive guess is ignored).
+                let (q4, k4) = self.stage(te, w0 + h * k3, q3 + (q3 - q0));
                 let two = T::from_f64(2.0);
-                h / T::from_f64(6.0) * (k1 + two * (k2 + k3) + k4)
+                (h / T::from_f64(6.0) * (k1 + two * (k2 + k3) + k4), q4)
             }
         };
         // Kahan-compensated update of the speed.
         let y = increment - state.speed_carry_rpm;
         let w1 = w0 + y;
         let carry = (w1 - w0) - y;
-        let q1 = self.flow_at(w1, q0);
+        let q1 = self.flow_at(w1, near);
         if !w1.is_finite() || !q1.is_finite() || !carry.is_finite() {
             return Err(BenchError::Diverged);
         }
@@ -452,6 +545,36 @@ mod tests {
         assert!(WhiteBox::new(p).is_err());
         p = BenchParams::paper();
         p.beta[3] = f64::NAN;
+        assert!(WhiteBox::new(p).is_err());
+    }
+
+    #[test]
+    fn const_benches_equal_the_run_time_ones() {
+        assert_eq!(
+            WhiteBox::new(BenchParams::<f32>::PAPER),
+            Ok(WhiteBox::<f32>::PAPER)
+        );
+        assert_eq!(
+            WhiteBox::new(BenchParams::<f64>::PAPER),
+            Ok(WhiteBox::<f64>::PAPER)
+        );
+        assert_eq!(WhiteBox::<f32>::paper(), WhiteBox::<f32>::PAPER);
+        assert_eq!(WhiteBox::<f64>::paper(), WhiteBox::<f64>::PAPER);
+        // Another set (the virtual bench's kind of change) and a load change after it.
+        let mut p = BenchParams::<f32>::PAPER;
+        p.inertia_kg_m2 *= 1.05;
+        p.valve_k2 *= 1.02;
+        let (mut at_build, mut at_run) = (
+            WhiteBox::<f32>::new_const(p).unwrap(),
+            WhiteBox::new(p).unwrap(),
+        );
+        assert_eq!(at_build, at_run);
+        assert_ne!(at_build, WhiteBox::<f32>::PAPER);
+        at_build.set_load(0.09, 0.3).unwrap();
+        at_run.set_load(0.09, 0.3).unwrap();
+        assert_eq!(at_build, at_run);
+        p.alpha[0] = 0.0;
+        assert_eq!(WhiteBox::<f32>::new_const(p), WhiteBox::new(p));
         assert!(WhiteBox::new(p).is_err());
     }
 
