@@ -78,13 +78,23 @@ impl Real for f32 {
     fn is_finite(self) -> bool {
         f32::is_finite(self)
     }
+    // IEEE maxNum/minNum (a NaN operand gives the other) by comparisons: `f32::max`/`min`
+    // are library calls (`fmaxf`, `fminf`) on a Cortex-M4F, whose FPU has no VMAXNM.
     #[inline]
     fn max(self, other: Self) -> Self {
-        f32::max(self, other)
+        if other.is_nan() || self > other {
+            self
+        } else {
+            other
+        }
     }
     #[inline]
     fn min(self, other: Self) -> Self {
-        f32::min(self, other)
+        if other.is_nan() || self < other {
+            self
+        } else {
+            other
+        }
     }
     #[inline]
     fn tanh(self) -> Self {
