@@ -256,8 +256,8 @@ fn parse_args(line: &str) -> Result<Args, &str> {
                 }
             }
             "setpoint" => a.setpoint = u16::try_from(number()?).map_err(|_| word)?,
-            "seed" => a.seed = u32::try_from(number()?).map_err(|_| word)?,
-            "run_ms" => a.run_ms = Some(u32::try_from(number()?).map_err(|_| word)?),
+            "seed" => a.seed = number()?,
+            "run_ms" => a.run_ms = Some(number()?),
             "vfd" if value == "uart" => a.vfd_uart = true,
             "narmax" => a.arithmetic = Arithmetic::from_name(value).ok_or(word)?,
             "timing" if value.is_empty() => a.timing = true,
