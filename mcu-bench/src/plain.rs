@@ -139,18 +139,16 @@ impl<const N: usize, const H: usize> PlainNarmax<N, H> {
 /// shapes do not fit.
 #[macro_export]
 macro_rules! plain_model {
-    ($m:ident) => {
-        $crate::plain::PlainNarmax::<
-                                                    { $crate::models::$m::INPUTS },
-                                                    { $crate::models::$m::HIDDEN },
-                                                >::new(
-                                                    $crate::models::$m::LAGS,
-                                                    &$crate::models::$m::W1,
-                                                    &$crate::models::$m::W2,
-                                                    $crate::models::$m::U_SCALING,
-                                                    $crate::models::$m::Y_SCALING,
-                                                    $crate::models::$m::U_RANGE,
-                                                    $crate::models::$m::Y_RANGE,
-                                                )
-    };
+    ($m:ident) => {{
+        use $crate::models::$m as m;
+        $crate::plain::PlainNarmax::<{ m::INPUTS }, { m::HIDDEN }>::new(
+            m::LAGS,
+            &m::W1,
+            &m::W2,
+            m::U_SCALING,
+            m::Y_SCALING,
+            m::U_RANGE,
+            m::Y_RANGE,
+        )
+    }};
 }
