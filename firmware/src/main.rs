@@ -35,8 +35,6 @@ mod models {
 mod nucleo;
 #[cfg(feature = "qemu")]
 mod qemu;
-#[cfg(feature = "timing")]
-mod timing;
 
 /// Pressure model period, ms.
 const PRESSURE_MS: u32 = (models::pressure::SAMPLE_PERIOD_S * 1000.0 + 0.5) as u32;

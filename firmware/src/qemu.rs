@@ -28,9 +28,8 @@
 //! enable=on,target=native,arg=firmware,arg=mode=2,…`), each `key=value`:
 //! `mode=0|1|2` (start-up mode, default 0 stop), `setpoint=0..10000` (0.01 %), `seed=N`
 //! (profile seed, 0..=4294967295, default 1), `narmax=f32|q15` (NARMAX arithmetic), `run_ms=N` (exit 0 after N ms; default: run until QEMU is
-//! stopped), `vfd=uart`, `timing` (measure the loop and the models, print, exit; only in an image built
-//! with the `timing` feature). A bad
-//! argument is reported and the firmware exits with status 1.
+//! stopped), `vfd=uart`. A bad argument is reported and the firmware exits with status 1. (The
+//! loop's and the models' cost is measured by `mcu-bench`: `cargo xtask bench`.)
 
 use crate::{serve, start_systick, Board};
 use controller::app::{AppConfig, Io, LogLine};
@@ -227,7 +226,6 @@ struct Args {
     seed: u32,
     run_ms: Option<u32>,
     vfd_uart: bool,
-    timing: bool,
     arithmetic: Arithmetic,
 }
 
@@ -238,7 +236,6 @@ fn parse_args(line: &str) -> Result<Args, &str> {
         seed: 1,
         run_ms: None,
         vfd_uart: false,
-        timing: false,
         arithmetic: Arithmetic::F32,
     };
     // The first word is the program name.
@@ -260,7 +257,6 @@ fn parse_args(line: &str) -> Result<Args, &str> {
             "run_ms" => a.run_ms = Some(number()?),
             "vfd" if value == "uart" => a.vfd_uart = true,
             "narmax" => a.arithmetic = Arithmetic::from_name(value).ok_or(word)?,
-            "timing" if value.is_empty() => a.timing = true,
             _ => return Err(word),
         }
     }
@@ -423,18 +419,6 @@ fn start(out: &mut hio::HostStream) -> Result<(), ()> {
     };
     let virt = VirtualIo::new(bench, config.vfd).ok_or(())?;
     let cp = cortex_m::Peripherals::take().ok_or(())?;
-    if args.timing {
-        #[cfg(feature = "timing")]
-        return crate::timing::report(cp.SYST, &mut app, virt, out).map_err(|_| ());
-        #[cfg(not(feature = "timing"))]
-        {
-            let _ = writeln!(
-                out,
-                "error: this image has no timing run: build it with `--features timing` (cargo xtask qemu does)"
-            );
-            return Err(());
-        }
-    }
     let dp = pac::Peripherals::take().ok_or(())?;
     dp.RCC.apb2enr().modify(|_, w| w.usart1en().set_bit());
     dp.RCC.apb1enr().modify(|_, w| w.usart2en().set_bit());

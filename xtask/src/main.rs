@@ -1,16 +1,20 @@
 //! Project tasks, run as `cargo xtask <task>`:
 //!
 //! - `qemu`: build the firmware for QEMU and run it on the virtual bench: a deterministic run
-//!   (`-icount`) and the timing run, or with `--scada-pty` in real time until stopped, the
-//!   SCADA slave on a pseudo-terminal.
-//! - `test`: everything CI checks: rustfmt, clippy `-D warnings` (host and both firmware
-//!   boards), the no_std crates built for the MCU, the host tests, docs, both firmware images
-//!   and their size budget, QEMU runs whose every log line must equal the same loop replayed on
-//!   the host bit for bit, the timing run, and an end-to-end test with `mbpoll` on the SCADA
+//!   (`-icount`), or with `--scada-pty` in real time until stopped, the SCADA slave on a
+//!   pseudo-terminal.
+//! - `bench`: the kernels' instructions per call on the MCU (mcu-bench under QEMU), the
+//!   images' and model-core's parts' size from their ELF, checked against
+//!   `bench/baseline.json` and the size budgets (see [`bench`]).
+//! - `test`: everything CI checks: rustfmt, clippy `-D warnings` (host, both firmware boards
+//!   and mcu-bench), the no_std crates built for the MCU, the host tests, docs, the bench and
+//!   its budgets (both firmware images), QEMU runs whose every log line must equal the same
+//!   loop replayed on the host bit for bit, and an end-to-end test with `mbpoll` on the SCADA
 //!   port.
 //!
 //! Needs `qemu-system-arm` and `mbpoll` on the PATH (Debian packages of the same names).
 
+mod bench;
 mod bridge;
 
 /// The firmware's NARMAX models, the very files it compiles in.
@@ -54,29 +58,41 @@ fn run(what: &str, cmd: &mut Command) -> Result {
     }
 }
 
-fn firmware_elf() -> PathBuf {
-    let target_dir = std::env::var_os("CARGO_TARGET_DIR")
+/// Cargo's target directory (`CARGO_TARGET_DIR`, else `target/` at the root).
+fn target_dir() -> PathBuf {
+    std::env::var_os("CARGO_TARGET_DIR")
         .map(PathBuf::from)
-        .unwrap_or_else(|| root().join("target"));
-    target_dir.join(TARGET).join("firmware").join("firmware")
+        .unwrap_or_else(|| root().join("target"))
 }
 
-/// The QEMU image with the timing run, built and kept beside the controller's image
-/// (`firmware-timing`), so that the two need not be rebuilt in turn.
-fn timing_elf() -> Result<PathBuf> {
-    build_firmware(Board::QemuTiming)?;
-    let elf = firmware_elf();
-    let timing = elf.with_file_name("firmware-timing");
-    std::fs::copy(&elf, &timing).map_err(|e| format!("{}: {e}", timing.display()))?;
-    Ok(timing)
+/// The firmware image last built (either board's: both build to this path).
+fn firmware_elf() -> PathBuf {
+    target_dir().join(TARGET).join("firmware").join("firmware")
 }
 
-/// The two boards the firmware builds for, and the QEMU image with its timing run.
+/// Flash and static RAM budget of an image, bytes.
+#[derive(Clone, Copy)]
+struct Budget {
+    flash: u64,
+    ram: u64,
+}
+
+/// The QEMU image's budget (the issue's: 64 KiB flash, 16 KiB static RAM).
+const QEMU_BUDGET: Budget = Budget {
+    flash: 64 * 1024,
+    ram: 16 * 1024,
+};
+/// The NUCLEO-F446RE image's budget.
+const NUCLEO_BUDGET: Budget = Budget {
+    flash: 64 * 1024,
+    ram: 16 * 1024,
+};
+
+/// The two boards the firmware builds for.
 #[derive(Clone, Copy, PartialEq)]
 enum Board {
     Qemu,
     Nucleo,
-    QemuTiming,
 }
 
 impl Board {
@@ -84,14 +100,25 @@ impl Board {
         match self {
             Board::Qemu => "qemu (STM32F405 netduinoplus2)",
             Board::Nucleo => "nucleo-f446re",
-            Board::QemuTiming => "qemu with the timing run",
+        }
+    }
+    /// The image's key in `mcu.json`.
+    fn key(self) -> &'static str {
+        match self {
+            Board::Qemu => "qemu",
+            Board::Nucleo => "nucleo-f446re",
+        }
+    }
+    fn budget(self) -> Budget {
+        match self {
+            Board::Qemu => QEMU_BUDGET,
+            Board::Nucleo => NUCLEO_BUDGET,
         }
     }
     fn feature_args(self) -> &'static [&'static str] {
         match self {
             Board::Qemu => &[],
             Board::Nucleo => &["--no-default-features", "--features", "nucleo-f446re"],
-            Board::QemuTiming => &["--features", "timing"],
         }
     }
 }
@@ -255,91 +282,6 @@ fn check_golden(output: &str, run_ms: u32) -> Result<usize> {
     Ok(target.len())
 }
 
-fn llvm_size() -> Option<PathBuf> {
-    let out = Command::new("rustc")
-        .args(["--print", "sysroot"])
-        .output()
-        .ok()?;
-    let sysroot = String::from_utf8(out.stdout).ok()?;
-    let host = std::env::var("HOST_TRIPLE").unwrap_or_else(|_| "x86_64-unknown-linux-gnu".into());
-    let p = Path::new(sysroot.trim())
-        .join("lib/rustlib")
-        .join(host)
-        .join("bin/llvm-size");
-    p.exists().then_some(p)
-}
-
-/// Flash and static RAM budget of an image, bytes (the issue's: 64 KiB and 16 KiB).
-const FLASH_BUDGET: u64 = 64 * 1024;
-const RAM_BUDGET: u64 = 16 * 1024;
-
-/// Prints `llvm-size` of the ELF and checks it against the budget.
-fn check_size(elf: &Path, board: Board) -> Result {
-    let tool = llvm_size().ok_or("llvm-size not found (rustup component add llvm-tools)")?;
-    let out = Command::new(tool)
-        .arg(elf)
-        .output()
-        .map_err(|e| format!("llvm-size: {e}"))?;
-    let text = String::from_utf8_lossy(&out.stdout);
-    print!("{} image:\n{text}", board.name());
-    let row = text.lines().nth(1).ok_or("llvm-size printed nothing")?;
-    let v: Vec<u64> = row
-        .split_whitespace()
-        .take(3)
-        .map(|x| x.parse().map_err(|_| format!("llvm-size row: {row}")))
-        .collect::<Result<_>>()?;
-    let (flash, ram) = (v[0] + v[1], v[1] + v[2]);
-    println!(
-        "    flash {flash} B of {FLASH_BUDGET} ({:.0} %), static RAM {ram} B of {RAM_BUDGET}",
-        100.0 * flash as f64 / FLASH_BUDGET as f64
-    );
-    if flash > FLASH_BUDGET || ram > RAM_BUDGET {
-        return Err(format!("{} image over budget", board.name()));
-    }
-    Ok(())
-}
-
-/// The figures of a timing run, in SysTick ticks and instructions.
-fn print_timing(out: &str) -> Result {
-    // -icount shift=0: 1 instruction = 1 ns; SysTick counts at 168 MHz.
-    let ins = |t: f64| t / 0.168;
-    for line in out.lines().filter(|l| l.starts_with("timing ")) {
-        println!("{line}");
-    }
-    let line = |p: &str| {
-        out.lines()
-            .find(|l| l.starts_with(p))
-            .ok_or_else(|| format!("no '{p}' line"))
-    };
-    let l = line("timing loop")?;
-    let (mean, max): (f64, f64) = (num(l, "mean")?, num(l, "max")?);
-    println!(
-        "≈ instructions per 1 ms tick: mean {:.0}, max {:.0} (of 168 000 at 168 MHz: {:.2} % / {:.1} %)",
-        ins(mean),
-        ins(max),
-        100.0 * ins(mean) / 168_000.0,
-        100.0 * ins(max) / 168_000.0
-    );
-    let rk4: f64 = num(line("timing rk4")?, "systick_ticks_per_step")?;
-    println!("≈ instructions per RK4 step: {:.0}", ins(rk4));
-    let l = line("timing narmax")?;
-    let mut parts = vec![];
-    for key in ["pressure_f32", "pressure_q15", "flow_f32", "flow_q15"] {
-        let t: f64 = num(l, key)?;
-        parts.push(format!("{key} ≈ {:.0}", ins(t)));
-    }
-    println!("instructions per NARMAX step: {}", parts.join(", "));
-    let l = line("timing observer")?;
-    let (mean, max, mon): (f64, f64, f64) = (num(l, "mean")?, num(l, "max")?, num(l, "monitor")?);
-    println!(
-        "≈ instructions per observer update (pressure, flow every other, VFD speed): mean {:.0}, max {:.0}; alarms {:.0}",
-        ins(mean),
-        ins(max),
-        ins(mon)
-    );
-    Ok(())
-}
-
 /// Options of `cargo xtask qemu`.
 struct QemuOptions {
     scada_pty: bool,
@@ -387,10 +329,17 @@ fn parse_qemu_options(args: &[String]) -> Result<QemuOptions> {
 const QEMU_USAGE: &str = "usage: cargo xtask qemu [--scada-pty] [--vfd PTY] [--seconds N] [--mode 0|1|2] [--setpoint 0..10000] [--seed N] [--narmax f32|q15]
   (no --scada-pty)  run the virtual bench for --seconds (default 20) of loop time, mode 2 (the
                     paper's excitation) unless --mode says otherwise, deterministic and faster
-                    than real time (-icount), then the timing run
+                    than real time (-icount); the kernels' cost is `cargo xtask bench`
   --scada-pty       real time, until stopped (Ctrl-C): the SCADA slave (unit 1, 19200 8N1 RTU)
                     on a pseudo-terminal; QEMU prints its path. Starts stopped (mode 0).
   --vfd PTY         the VFD master on USART2 to that serial device (e.g. pumpbench vfd-sim's)";
+
+const BENCH_USAGE: &str = "usage: cargo xtask bench [--save-baseline]
+  (no option)       build and run mcu-bench in QEMU (-icount shift=0), measure both firmware
+                    images; print the tables, write mcu.json under the target directory's
+                    bench/; fail if a kernel costs more than 5 % over bench/baseline.json or an
+                    image exceeds its flash or RAM budget
+  --save-baseline   the same, then write the figures to bench/baseline.json (new budgets)";
 
 fn qemu(args: &[String]) -> Result {
     let o = parse_qemu_options(args)?;
@@ -450,8 +399,7 @@ fn qemu(args: &[String]) -> Result {
     }
     fw_args.push(format!("run_ms={}", o.seconds * 1000 + 1));
     print!("{}", qemu_output(&elf, &fw_args)?);
-    fw_args.push("timing".into());
-    print_timing(&qemu_output(&timing_elf()?, &fw_args)?)
+    Ok(())
 }
 
 /// The end-to-end check: the firmware in QEMU in real time with its SCADA port on a
@@ -944,7 +892,7 @@ fn test() -> Result {
         "clippy (host)",
         cargo().args(["clippy", "--all-targets", "--", "-D", "warnings"]),
     )?;
-    for board in [Board::Qemu, Board::QemuTiming, Board::Nucleo] {
+    for board in [Board::Qemu, Board::Nucleo] {
         run(
             &format!("clippy (firmware, {})", board.name()),
             cargo()
@@ -953,6 +901,21 @@ fn test() -> Result {
                 .args(["--", "-D", "warnings"]),
         )?;
     }
+    run(
+        "clippy (mcu-bench, profile firmware)",
+        cargo().args([
+            "clippy",
+            "-p",
+            "mcu-bench",
+            "--target",
+            TARGET,
+            "--profile",
+            "firmware",
+            "--",
+            "-D",
+            "warnings",
+        ]),
+    )?;
     run(
         "no_std crates build for the MCU (model-core, controller)",
         cargo().args([
@@ -972,12 +935,10 @@ fn test() -> Result {
             .args(["doc", "--no-deps", "-p", "model-core", "-p", "controller"])
             .env("RUSTDOCFLAGS", "-D warnings"),
     )?;
+    eprintln!("==> bench: kernels in QEMU, image sizes, budgets");
+    bench::run_bench(&bench::Options::default())?;
     let elf = firmware_elf();
-    build_firmware(Board::Nucleo)?;
-    check_size(&elf, Board::Nucleo)?;
-    let timing = timing_elf()?;
     build_firmware(Board::Qemu)?;
-    check_size(&elf, Board::Qemu)?;
     eprintln!("==> QEMU runs against the host replay (netduinoplus2, -icount shift=0,sleep=off)");
     const RUN_MS: u32 = 20_000;
     for narmax in ["f32", "q15"] {
@@ -992,7 +953,6 @@ fn test() -> Result {
             "QEMU run, NARMAX {narmax}: {n} log lines (white-box, measured, NARMAX, residuals) equal the host replay, bit for bit"
         );
     }
-    print_timing(&qemu_output(&timing, &["mode=2".into(), "timing".into()])?)?;
     eprintln!("==> end to end: QEMU in real time, SCADA on a pty, mbpoll as the client");
     print!("{}", e2e::run(&elf)?);
     eprintln!(
@@ -1007,11 +967,18 @@ fn main() -> ExitCode {
     let result = match args.first().map(String::as_str) {
         Some("qemu") => qemu(&args[1..]),
         Some("test") => test(),
+        Some("bench") => match args.get(1).map(String::as_str) {
+            None => bench::run_bench(&bench::Options::default()),
+            Some("--save-baseline") => bench::run_bench(&bench::Options {
+                save_baseline: true,
+            }),
+            Some(other) => Err(format!("unknown option '{other}'\n{BENCH_USAGE}")),
+        },
         Some("e2e") => build_firmware(Board::Qemu).and_then(|()| {
             print!("{}", e2e::run(&firmware_elf())?);
             Ok(())
         }),
-        _ => Err(format!("usage: cargo xtask <qemu|test>\n  qemu  build the firmware and run it in QEMU on the virtual bench\n  test  fmt, clippy, tests, both firmware images and their size, QEMU runs against the host, mbpoll end to end\n  e2e   only the mbpoll end-to-end test\n{QEMU_USAGE}")),
+        _ => Err(format!("usage: cargo xtask <qemu|bench|test|e2e>\n  qemu   build the firmware and run it in QEMU on the virtual bench\n  bench  the kernels' instructions per call on the MCU, image sizes, checked against bench/baseline.json and the budgets\n  test   fmt, clippy, tests, the bench and its budgets, QEMU runs against the host, mbpoll end to end\n  e2e    only the mbpoll end-to-end test\n{QEMU_USAGE}\n{BENCH_USAGE}")),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

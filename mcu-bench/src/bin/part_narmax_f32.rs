@@ -1,0 +1,17 @@
+//! Size probe: the white-box bench and the NARMAX models in f32.
+//! (`cargo xtask bench` reads its flash and RAM from the ELF; it also runs under QEMU and
+//! exits 0).
+#![no_std]
+#![no_main]
+
+use mcu_bench::parts;
+
+#[cortex_m_rt::entry]
+fn main() -> ! {
+    parts::exit(parts::whitebox().and_then(|()| parts::narmax_f32()).is_ok())
+}
+
+#[panic_handler]
+fn panic(_: &core::panic::PanicInfo) -> ! {
+    parts::exit(false)
+}

@@ -1,0 +1,725 @@
+//! `cargo xtask bench`: what the kernels cost on the MCU and what the images weigh.
+//!
+//! - Kernels: builds `mcu-bench` (profile `firmware`) and runs its bench image under
+//!   `qemu-system-arm -M netduinoplus2 -icount shift=0`, where one instruction is 1 ns and
+//!   SysTick counts at 168 MHz: instructions per call = SysTick ticks / 0.168, less the empty
+//!   call measured the same way. These are instructions counted by QEMU, not cycles.
+//! - Sizes, from the ELF files (the `object` crate): flash = text + rodata + data (the load
+//!   image), RAM = data + bss (`.bss` and `.uninit`; the stack is not counted), for both
+//!   firmware images and for mcu-bench's size probes (each links one more part of model-core);
+//!   the ten largest symbols of each image; the software-f64 routines each image holds.
+//! - Prints Markdown tables, writes `mcu.json` under the target directory's `bench/`, and
+//!   checks the budgets: no kernel more than [`KERNEL_TOLERANCE`] over `bench/baseline.json`,
+//!   no image over its flash or RAM budget ([`Board::budget`]).
+
+use super::{build_firmware, cargo, field, firmware_elf, num, root, run, target_dir, Board};
+use super::{Result, QEMU_TIMEOUT_S, TARGET};
+use object::{Object, ObjectSection, ObjectSymbol, SectionFlags, SymbolKind};
+use serde::Serialize;
+use std::collections::{BTreeMap, HashSet};
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::Instant;
+
+/// How much a kernel may cost over its figure in `bench/baseline.json` before the bench fails
+/// (a fraction: 5 %). Counts under `-icount` are deterministic: any change is the code's.
+pub const KERNEL_TOLERANCE: f64 = 0.05;
+
+/// Fail when a firmware image holds software-f64 routines (`__aeabi_d*`, `__adddf3`, …).
+///
+/// Whether software f64 routines in a firmware image fail the check: the images hold none
+/// (the models and the white-box parameters are compile-time data, the loop is f32).
+pub const FORBID_SOFT_F64: bool = true;
+
+/// SysTick ticks per instruction under `-icount shift=0`: 1 instruction = 1 ns, SysTick at
+/// 168 MHz.
+const TICKS_PER_INSTRUCTION: f64 = 0.168;
+
+/// mcu-bench's size probes, in order, each linking one more part of model-core than the last:
+/// (JSON key, binary, what it adds).
+const PARTS: &[(&str, &str, &str)] = &[
+    (
+        "base",
+        "part_base",
+        "runtime only (cortex-m-rt, semihosting exit)",
+    ),
+    ("whitebox", "part_whitebox", "+ white-box bench, f32"),
+    ("narmax_f32", "part_narmax_f32", "+ NARMAX f32"),
+    (
+        "narmax_fixed",
+        "part_narmax_fixed",
+        "+ NARMAX Q15 (compile-time statics)",
+    ),
+    ("observer", "part_observer", "+ observer and alarm monitor"),
+];
+
+/// The kernels `mcu.json` has at its top level (besides `observer_update`).
+const TOP_LEVEL: [&str; 7] = [
+    "narmax_pressure_f32",
+    "narmax_pressure_fixed",
+    "narmax_flow_f32",
+    "narmax_flow_fixed",
+    "rk4_step",
+    "tick_mean",
+    "tick_max",
+];
+
+/// The checked-in figures the bench is held to.
+fn baseline_path() -> PathBuf {
+    root().join("bench").join("baseline.json")
+}
+
+/// Where the bench writes its figures.
+pub fn json_path() -> PathBuf {
+    target_dir().join("bench").join("mcu.json")
+}
+
+/// Bytes of an image by kind, from its ELF sections.
+#[derive(Debug, Default, Clone, Copy, Serialize)]
+pub struct Size {
+    /// text + rodata + data: what is programmed into flash.
+    pub flash: u64,
+    /// data + bss: static RAM.
+    pub ram: u64,
+    /// Executable sections.
+    pub text: u64,
+    /// Read-only data (and the vector table).
+    pub rodata: u64,
+    /// Initialised data (in flash and in RAM).
+    pub data: u64,
+    /// Zeroed and uninitialised data (`.bss`, `.uninit`).
+    pub bss: u64,
+}
+
+/// One symbol of an image.
+#[derive(Debug, Clone, Serialize)]
+pub struct Symbol {
+    /// Size, bytes.
+    pub bytes: u64,
+    /// Demangled name.
+    pub name: String,
+}
+
+/// What an ELF image holds.
+#[derive(Debug, Clone, Serialize)]
+pub struct Image {
+    /// Sizes.
+    #[serde(flatten)]
+    pub size: Size,
+    /// Flash budget, bytes.
+    pub flash_budget: u64,
+    /// RAM budget, bytes.
+    pub ram_budget: u64,
+    /// The largest symbols (functions and data), largest first.
+    pub largest: Vec<Symbol>,
+    /// Software-f64 routines linked in.
+    pub soft_f64: Vec<String>,
+}
+
+/// `true` for a compiler-builtins routine of software double precision: the ARM EABI names
+/// (`__aeabi_dadd`, `__aeabi_dcmpeq`, `__aeabi_d2f`, `__aeabi_f2d`, `__aeabi_i2d`, …) and the
+/// GCC ones (`__adddf3`, `__eqdf2`, `__extendsfdf2`, `__truncdfsf2`, `__fixdfsi`,
+/// `__floatsidf`, `__powidf2`, …).
+pub fn is_soft_f64(name: &str) -> bool {
+    if let Some(rest) = name.strip_prefix("__aeabi_") {
+        return (rest.starts_with('d') && !rest.starts_with("div")) || rest.ends_with("2d");
+    }
+    name.strip_prefix("__").is_some_and(|rest| {
+        rest.contains("df")
+            && rest
+                .chars()
+                .all(|c| c.is_ascii_lowercase() || c.is_ascii_digit())
+    })
+}
+
+/// Sizes, largest symbols and software-f64 routines of the ELF at `path`.
+pub fn read_elf(path: &Path, largest: usize) -> Result<(Size, Vec<Symbol>, Vec<String>)> {
+    let what = |e: &dyn std::fmt::Display| format!("{}: {e}", path.display());
+    let bytes = std::fs::read(path).map_err(|e| what(&e))?;
+    let file = object::File::parse(&*bytes).map_err(|e| what(&e))?;
+    let mut s = Size::default();
+    let (alloc, write, exec) = (
+        object::elf::SHF_ALLOC.0,
+        object::elf::SHF_WRITE.0,
+        object::elf::SHF_EXECINSTR.0,
+    );
+    for section in file.sections() {
+        let SectionFlags::Elf { sh_type, sh_flags } = section.flags() else {
+            return Err(what(&"not an ELF section"));
+        };
+        let sh_flags = sh_flags.0;
+        if sh_flags & alloc == 0 {
+            continue;
+        }
+        let n = section.size();
+        if sh_type == object::elf::SHT_NOBITS {
+            s.bss += n;
+        } else if sh_flags & write != 0 {
+            s.data += n;
+        } else if sh_flags & exec != 0 {
+            s.text += n;
+        } else {
+            s.rodata += n;
+        }
+    }
+    s.flash = s.text + s.rodata + s.data;
+    s.ram = s.data + s.bss;
+    let mut seen = HashSet::new();
+    let mut symbols: Vec<Symbol> = file
+        .symbols()
+        .filter(|sym| {
+            sym.is_definition()
+                && sym.size() > 0
+                && matches!(sym.kind(), SymbolKind::Text | SymbolKind::Data)
+                // Aliases: one entry per (address, size); Thumb code addresses have bit 0 set.
+                && seen.insert((sym.address() & !1, sym.size()))
+        })
+        .filter_map(|sym| {
+            Some(Symbol {
+                bytes: sym.size(),
+                name: format!("{:#}", rustc_demangle::demangle(sym.name().ok()?)),
+            })
+        })
+        .collect();
+    symbols.sort_by(|a, b| b.bytes.cmp(&a.bytes).then_with(|| a.name.cmp(&b.name)));
+    symbols.truncate(largest);
+    // The EABI names are C symbols; compiler-builtins' GCC-named routines are mangled Rust
+    // (`compiler_builtins::float::add::__adddf3`): the demangled name's last segment.
+    let mut soft: Vec<String> = file
+        .symbols()
+        .filter(|sym| sym.is_definition())
+        .filter_map(|sym| {
+            let name = format!("{:#}", rustc_demangle::demangle(sym.name().ok()?));
+            let routine = name.rsplit("::").next().unwrap_or(&name);
+            is_soft_f64(routine).then(|| routine.to_string())
+        })
+        .collect();
+    soft.sort();
+    soft.dedup();
+    Ok((s, symbols, soft))
+}
+
+/// One row the bench image printed.
+#[derive(Debug)]
+struct Row {
+    name: String,
+    baseline: Option<String>,
+    max_name: Option<String>,
+    calls: u64,
+    ticks: u64,
+    max: u64,
+}
+
+/// The bench image's rows (`row name=… calls=… ticks=… max=…`).
+fn parse_rows(out: &str) -> Result<Vec<Row>> {
+    if let Some(e) = out.lines().find(|l| l.starts_with("error:")) {
+        return Err(format!("mcu-bench: {e}"));
+    }
+    if !out.lines().any(|l| l == "done") {
+        return Err(format!("mcu-bench did not finish:\n{out}"));
+    }
+    out.lines()
+        .filter(|l| l.starts_with("row "))
+        .map(|l| {
+            Ok(Row {
+                name: field(l, "name")?.to_string(),
+                baseline: field(l, "baseline").ok().map(str::to_string),
+                max_name: field(l, "max_name").ok().map(str::to_string),
+                calls: num(l, "calls")?,
+                ticks: num(l, "ticks")?,
+                max: num(l, "max")?,
+            })
+        })
+        .collect()
+}
+
+/// One figure of the kernel table.
+#[derive(Debug)]
+struct Kernel {
+    name: String,
+    /// Instructions per call, less the empty call.
+    instructions: f64,
+    /// "400" or "max of 20000".
+    calls: String,
+    baseline: Option<String>,
+}
+
+/// Instructions per call of every row (and the longest call of those that report it), less
+/// the empty call; and the empty call's cost.
+fn kernels(rows: &[Row]) -> Result<(Vec<Kernel>, f64)> {
+    let ins = |ticks: f64| ticks / TICKS_PER_INSTRUCTION;
+    let empty = rows
+        .iter()
+        .find(|r| r.name == "empty")
+        .ok_or("mcu-bench printed no 'empty' row")?;
+    let empty = ins(empty.ticks as f64 / empty.calls.max(1) as f64);
+    let mut out = vec![];
+    for r in rows.iter().filter(|r| r.name != "empty") {
+        if r.calls == 0 {
+            return Err(format!("mcu-bench row {} made no call", r.name));
+        }
+        out.push(Kernel {
+            name: r.name.clone(),
+            instructions: ins(r.ticks as f64 / r.calls as f64) - empty,
+            calls: group(r.calls as i64),
+            baseline: r.baseline.clone(),
+        });
+        if let Some(m) = &r.max_name {
+            out.push(Kernel {
+                name: m.clone(),
+                instructions: ins(r.max as f64) - empty,
+                calls: format!("max of {}", group(r.calls as i64)),
+                baseline: None,
+            });
+        }
+    }
+    Ok((out, empty))
+}
+
+/// `mcu.json`.
+#[derive(Debug, Serialize)]
+pub struct Report {
+    narmax_pressure_f32: i64,
+    narmax_pressure_fixed: i64,
+    narmax_flow_f32: i64,
+    narmax_flow_fixed: i64,
+    rk4_step: i64,
+    tick_mean: i64,
+    tick_max: i64,
+    observer_update: Option<i64>,
+    /// "qemu", "nucleo-f446re".
+    images: BTreeMap<&'static str, Image>,
+    /// Every row, instructions per call (less the empty call).
+    kernels: BTreeMap<String, i64>,
+    /// The size probes' flash and RAM.
+    parts: BTreeMap<&'static str, Size>,
+    /// The empty call's cost, taken off every kernel (instructions).
+    empty_call: f64,
+    /// What the figures are.
+    units: &'static str,
+}
+
+/// Options of `cargo xtask bench`.
+#[derive(Debug, Default)]
+pub struct Options {
+    /// Write the figures measured to `bench/baseline.json` instead of checking against it.
+    pub save_baseline: bool,
+}
+
+/// Thousands separated by spaces, as the README writes them.
+fn group(n: i64) -> String {
+    let digits = n.unsigned_abs().to_string();
+    let mut s = String::new();
+    for (i, c) in digits.chars().enumerate() {
+        if i > 0 && (digits.len() - i).is_multiple_of(3) {
+            s.push(' ');
+        }
+        s.push(c);
+    }
+    if n < 0 {
+        format!("−{s}")
+    } else {
+        s
+    }
+}
+
+/// The bench image's output under QEMU (`-icount shift=0`: deterministic).
+fn qemu_run(elf: &Path) -> Result<String> {
+    let start = Instant::now();
+    let out = Command::new("timeout")
+        .arg(QEMU_TIMEOUT_S.to_string())
+        .args([
+            "qemu-system-arm",
+            "-M",
+            "netduinoplus2",
+            "-icount",
+            "shift=0",
+        ])
+        .args([
+            "-nographic",
+            "-semihosting-config",
+            "enable=on,target=native",
+        ])
+        .arg("-kernel")
+        .arg(elf)
+        .stdin(Stdio::null())
+        .stderr(Stdio::inherit())
+        .output()
+        .map_err(|e| {
+            format!("cannot start qemu-system-arm (apt-get install qemu-system-arm): {e}")
+        })?;
+    let text = String::from_utf8_lossy(&out.stdout).into_owned();
+    eprintln!(
+        "    qemu {}: {:.1} s, {}",
+        elf.file_name().unwrap_or_default().to_string_lossy(),
+        start.elapsed().as_secs_f64(),
+        out.status
+    );
+    if !out.status.success() {
+        return Err(format!(
+            "{} in QEMU exited with {}:\n{text}",
+            elf.display(),
+            out.status
+        ));
+    }
+    Ok(text)
+}
+
+/// A figure of the checked-in baseline: `kernels.<name>`, else the top-level key.
+fn baseline_kernel(baseline: &serde_json::Value, name: &str) -> Option<f64> {
+    baseline
+        .get("kernels")
+        .and_then(|k| k.get(name))
+        .or_else(|| baseline.get(name))
+        .and_then(serde_json::Value::as_f64)
+}
+
+/// Builds and measures everything, prints the tables, writes `mcu.json`, then checks the
+/// budgets (or saves the baseline). Leaves the QEMU firmware image built last.
+pub fn run_bench(o: &Options) -> Result {
+    let start = Instant::now();
+    let baseline: Option<serde_json::Value> = match std::fs::read_to_string(baseline_path()) {
+        Ok(text) => Some(
+            serde_json::from_str(&text)
+                .map_err(|e| format!("{}: {e}", baseline_path().display()))?,
+        ),
+        Err(_) => None,
+    };
+    // The firmware images (the same ELF path: measured right after each build).
+    let mut images = BTreeMap::new();
+    for board in [Board::Nucleo, Board::Qemu] {
+        build_firmware(board)?;
+        let (size, largest, soft_f64) = read_elf(&firmware_elf(), 10)?;
+        let budget = board.budget();
+        images.insert(
+            board.key(),
+            Image {
+                size,
+                flash_budget: budget.flash,
+                ram_budget: budget.ram,
+                largest,
+                soft_f64,
+            },
+        );
+    }
+    run(
+        "mcu-bench build (profile firmware: opt-level s, LTO; the bench and the size probes)",
+        cargo().args([
+            "build",
+            "-p",
+            "mcu-bench",
+            "--profile",
+            "firmware",
+            "--target",
+            TARGET,
+        ]),
+    )?;
+    let bin_dir = target_dir().join(TARGET).join("firmware");
+    let mut parts = BTreeMap::new();
+    let mut part_sizes = vec![];
+    for (key, bin, _) in PARTS {
+        let elf = bin_dir.join(bin);
+        // Each probe runs its parts once and must exit 0 (a probe that faults measures
+        // nothing).
+        qemu_run(&elf)?;
+        let (size, _, _) = read_elf(&elf, 0)?;
+        parts.insert(*key, size);
+        part_sizes.push(size);
+    }
+    eprintln!("==> mcu-bench in QEMU (netduinoplus2, -icount shift=0)");
+    let rows = parse_rows(&qemu_run(&bin_dir.join("mcu-bench"))?)?;
+    let (kernels, empty) = kernels(&rows)?;
+    let rounded: BTreeMap<String, i64> = kernels
+        .iter()
+        .map(|k| (k.name.clone(), k.instructions.round() as i64))
+        .collect();
+    let get = |name: &str| {
+        rounded
+            .get(name)
+            .copied()
+            .ok_or_else(|| format!("mcu-bench measured no '{name}'"))
+    };
+    let report = Report {
+        narmax_pressure_f32: get(TOP_LEVEL[0])?,
+        narmax_pressure_fixed: get(TOP_LEVEL[1])?,
+        narmax_flow_f32: get(TOP_LEVEL[2])?,
+        narmax_flow_fixed: get(TOP_LEVEL[3])?,
+        rk4_step: get(TOP_LEVEL[4])?,
+        tick_mean: get(TOP_LEVEL[5])?,
+        tick_max: get(TOP_LEVEL[6])?,
+        observer_update: rounded.get("observer_update").copied(),
+        images,
+        kernels: rounded.clone(),
+        parts,
+        empty_call: (empty * 10.0).round() / 10.0,
+        units: "kernels: instructions per call counted by QEMU (-icount shift=0: SysTick ticks / 0.168), less the empty call; sizes: bytes",
+    };
+
+    // The tables.
+    let base = baseline.as_ref();
+    let mut t = String::new();
+    let _ = writeln!(
+        t,
+        "\n### Kernels on the Cortex-M4 (QEMU netduinoplus2, instructions per call, less the empty call: {empty:.1})\n"
+    );
+    let _ = writeln!(
+        t,
+        "| kernel | instructions per call | calls | compared with | ratio | bench/baseline.json | change |"
+    );
+    let _ = writeln!(t, "|---|---:|---:|---|---:|---:|---:|");
+    for k in &kernels {
+        let n = rounded[&k.name];
+        let (vs, ratio) = match k.baseline.as_ref().and_then(|b| Some((b, rounded.get(b)?))) {
+            Some((b, &bn)) if bn > 0 => (b.as_str(), format!("{:.2}×", n as f64 / bn as f64)),
+            _ => ("", String::new()),
+        };
+        let (old, change) = match base.and_then(|b| baseline_kernel(b, &k.name)) {
+            Some(old) if old > 0.0 => (
+                group(old.round() as i64),
+                format!("{:+.1} %", 100.0 * (n as f64 / old - 1.0)),
+            ),
+            _ => ("—".into(), "new".into()),
+        };
+        let _ = writeln!(
+            t,
+            "| {} | {} | {} | {vs} | {ratio} | {old} | {change} |",
+            k.name,
+            group(n),
+            k.calls
+        );
+    }
+    let _ = writeln!(t, "\n### Images (bytes, from the ELF)\n");
+    let _ = writeln!(
+        t,
+        "| image | flash | of budget | RAM | of budget | text | rodata | data | bss | flash, RAM in bench/baseline.json |"
+    );
+    let _ = writeln!(t, "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
+    for (key, im) in &report.images {
+        let s = &im.size;
+        let old = base
+            .and_then(|b| {
+                let i = b.get("images")?.get(*key)?;
+                Some(format!(
+                    "{}, {}",
+                    group(i.get("flash")?.as_i64()?),
+                    group(i.get("ram")?.as_i64()?)
+                ))
+            })
+            .unwrap_or_else(|| "—".into());
+        let _ = writeln!(
+            t,
+            "| {key} | {} | {:.1} % of {} | {} | {:.1} % of {} | {} | {} | {} | {} | {old} |",
+            group(s.flash as i64),
+            100.0 * s.flash as f64 / im.flash_budget as f64,
+            group(im.flash_budget as i64),
+            group(s.ram as i64),
+            100.0 * s.ram as f64 / im.ram_budget as f64,
+            group(im.ram_budget as i64),
+            group(s.text as i64),
+            group(s.rodata as i64),
+            group(s.data as i64),
+            group(s.bss as i64),
+        );
+    }
+    let _ = writeln!(
+        t,
+        "\n### model-core by part (mcu-bench size probes, bytes)\n"
+    );
+    let _ = writeln!(
+        t,
+        "| probe | links | flash | RAM | flash added | RAM added |"
+    );
+    let _ = writeln!(t, "|---|---|---:|---:|---:|---:|");
+    for (i, (_, bin, what)) in PARTS.iter().enumerate() {
+        let s = part_sizes[i];
+        let (df, dr) = match i.checked_sub(1).map(|j| part_sizes[j]) {
+            Some(p) => (
+                format!("+{}", group(s.flash as i64 - p.flash as i64)),
+                format!("+{}", group(s.ram as i64 - p.ram as i64)),
+            ),
+            None => (String::new(), String::new()),
+        };
+        let _ = writeln!(
+            t,
+            "| {bin} | {what} | {} | {} | {df} | {dr} |",
+            group(s.flash as i64),
+            group(s.ram as i64)
+        );
+    }
+    for (key, im) in &report.images {
+        let _ = writeln!(t, "\n### The ten largest symbols, {key} image\n");
+        let _ = writeln!(t, "| bytes | symbol |");
+        let _ = writeln!(t, "|---:|---|");
+        for s in &im.largest {
+            let _ = writeln!(t, "| {} | `{}` |", group(s.bytes as i64), s.name);
+        }
+    }
+    let _ = writeln!(t);
+    for (key, im) in &report.images {
+        let _ = writeln!(
+            t,
+            "software f64 in the {key} image ({} routines{}): {}",
+            im.soft_f64.len(),
+            if FORBID_SOFT_F64 {
+                ", forbidden"
+            } else {
+                ", reported only: FORBID_SOFT_F64 is off"
+            },
+            if im.soft_f64.is_empty() {
+                "none".to_string()
+            } else {
+                im.soft_f64.join(" ")
+            }
+        );
+    }
+    print!("{t}");
+
+    let json = serde_json::to_string_pretty(&report).map_err(|e| e.to_string())? + "\n";
+    let path = json_path();
+    if let Some(dir) = path.parent() {
+        std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    }
+    std::fs::write(&path, &json).map_err(|e| format!("{}: {e}", path.display()))?;
+    println!("\nwrote {}", path.display());
+    if o.save_baseline {
+        std::fs::write(baseline_path(), &json)
+            .map_err(|e| format!("{}: {e}", baseline_path().display()))?;
+        println!("wrote {} (the new budgets)", baseline_path().display());
+    }
+    eprintln!("    bench: {:.1} s", start.elapsed().as_secs_f64());
+
+    // The budgets.
+    let mut failed = vec![];
+    match base {
+        _ if o.save_baseline => {}
+        None => failed.push(format!(
+            "no {}: the kernels have no budget (cargo xtask bench --save-baseline writes one)",
+            baseline_path().display()
+        )),
+        Some(b) => {
+            let names: Vec<String> = match b.get("kernels").and_then(|k| k.as_object()) {
+                Some(k) => k.keys().cloned().collect(),
+                None => TOP_LEVEL.iter().map(|s| s.to_string()).collect(),
+            };
+            for name in names {
+                let Some(old) = baseline_kernel(b, &name) else {
+                    continue;
+                };
+                match rounded.get(&name) {
+                    None => failed.push(format!(
+                        "kernel {name}: in bench/baseline.json ({old}) but not measured (rename or remove it there)"
+                    )),
+                    Some(&n) if n as f64 > old * (1.0 + KERNEL_TOLERANCE) => failed.push(format!(
+                        "kernel {name}: {} instructions per call, {:+.1} % over bench/baseline.json's {} (limit +{:.0} %)",
+                        group(n),
+                        100.0 * (n as f64 / old - 1.0),
+                        group(old.round() as i64),
+                        100.0 * KERNEL_TOLERANCE
+                    )),
+                    Some(_) => {}
+                }
+            }
+        }
+    }
+    for (key, im) in &report.images {
+        for (what, n, budget) in [
+            ("flash", im.size.flash, im.flash_budget),
+            ("RAM", im.size.ram, im.ram_budget),
+        ] {
+            if n > budget {
+                failed.push(format!(
+                    "{key} image: {what} {} B, {} B over its budget of {} B",
+                    group(n as i64),
+                    group((n - budget) as i64),
+                    group(budget as i64)
+                ));
+            }
+        }
+        if FORBID_SOFT_F64 && !im.soft_f64.is_empty() {
+            failed.push(format!(
+                "{key} image: software f64 routines linked in: {}",
+                im.soft_f64.join(" ")
+            ));
+        }
+    }
+    if failed.is_empty() {
+        println!(
+            "bench: every kernel within +{:.0} % of bench/baseline.json, every image within its budget",
+            100.0 * KERNEL_TOLERANCE
+        );
+        Ok(())
+    } else {
+        for f in &failed {
+            println!("BUDGET FAILED: {f}");
+        }
+        Err(format!("bench: {} budget(s) exceeded", failed.len()))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn soft_f64_names() {
+        for n in [
+            "__aeabi_dadd",
+            "__aeabi_dcmpeq",
+            "__aeabi_d2f",
+            "__aeabi_d2iz",
+            "__aeabi_f2d",
+            "__aeabi_i2d",
+            "__aeabi_ul2d",
+            "__adddf3",
+            "__muldf3",
+            "__eqdf2",
+            "__unorddf2",
+            "__extendsfdf2",
+            "__truncdfsf2",
+            "__fixdfsi",
+            "__floatunsidf",
+            "__powidf2",
+        ] {
+            assert!(is_soft_f64(n), "{n}");
+        }
+        for n in [
+            "__aeabi_fadd",
+            "__aeabi_uidiv",
+            "__aeabi_idiv0",
+            "__aeabi_memcpy",
+            "__addsf3",
+            "__sbss",
+            "__defmt_default_timestamp",
+            "_ZN4libm4math5tanhf5tanhf17h0123456789abcdefE",
+            "main",
+        ] {
+            assert!(!is_soft_f64(n), "{n}");
+        }
+    }
+
+    #[test]
+    fn rows_and_kernels() {
+        let out = "mcu-bench: …\nrow name=empty calls=10 ticks=168 max=17\nrow name=a calls=2 ticks=3360 max=1700\nrow name=b baseline=a max_name=b_max calls=4 ticks=3360 max=1008\ndone\n";
+        let rows = parse_rows(out).unwrap();
+        let (k, empty) = kernels(&rows).unwrap();
+        assert!((empty - 100.0).abs() < 1e-9);
+        let names: Vec<&str> = k.iter().map(|k| k.name.as_str()).collect();
+        assert_eq!(names, ["a", "b", "b_max"]);
+        assert!((k[0].instructions - 9900.0).abs() < 1e-6);
+        assert!((k[1].instructions - 4900.0).abs() < 1e-6);
+        assert!((k[2].instructions - 5900.0).abs() < 1e-6);
+        assert_eq!(k[1].baseline.as_deref(), Some("a"));
+        assert!(parse_rows("row name=a calls=1 ticks=1 max=1\n").is_err());
+        assert!(parse_rows("error: a: failed\ndone\n").is_err());
+    }
+
+    #[test]
+    fn grouping() {
+        assert_eq!(group(0), "0");
+        assert_eq!(group(999), "999");
+        assert_eq!(group(1000), "1 000");
+        assert_eq!(group(65536), "65 536");
+        assert_eq!(group(-1234567), "−1 234 567");
+    }
+}
