@@ -1,6 +1,6 @@
 //! Models of the UFMG hydraulic test bench (Cavazzana, Barbosa, Tôrres, Martinez) for a
-//! controller MCU: `no_std`, no allocation, no `unsafe`, `f32` on the target and `f64` on the
-//! host through one code path ([`Real`]).
+//! controller MCU: `no_std`, no allocation, `f32` on the target and `f64` on the host through
+//! one code path ([`Real`]); no `unsafe` but in [`dsp`], one audited `asm!` for the M4's `SMLAD`.
 //!
 //! # The white-box bench (paper eqs. 3-8)
 //!
