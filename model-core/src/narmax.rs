@@ -210,6 +210,35 @@ pub struct NarmaxOutput<T> {
     pub clamped: bool,
 }
 
+/// Runs `next` until two successive outputs differ by less than `tol` for `need` steps in a
+/// row (from `start`), at most `max_steps` times: the settled output, `None` if it does not
+/// settle or leaves the finite numbers.
+fn settle<T: Real>(
+    start: T,
+    tol: T,
+    need: usize,
+    max_steps: usize,
+    mut next: impl FnMut() -> T,
+) -> Option<T> {
+    let (mut last, mut calm) = (start, 0);
+    for _ in 0..max_steps {
+        let y = next();
+        if !y.is_finite() {
+            return None;
+        }
+        if (y - last).abs() < tol {
+            calm += 1;
+            if calm >= need {
+                return Some(y);
+            }
+        } else {
+            calm = 0;
+        }
+        last = y;
+    }
+    None
+}
+
 fn shift_in<T: Copy>(reg: &mut [T], x: T) {
     if reg.is_empty() {
         return;
@@ -363,25 +392,10 @@ impl<T: Real, const N: usize, const H: usize> Narmax<T, N, H> {
     /// (oscillating or diverging model).
     pub fn steady_output(&self, u: T, tol: T, max_steps: usize) -> Option<T> {
         let mut st = self.state_at(u, self.y_scale.mean);
-        let mut last = self.y_scale.mean;
-        let mut calm = 0;
         let need = self.lags.max_lag().max(1);
-        for _ in 0..max_steps {
-            let y = self.simulate_step(&mut st, u).y;
-            if !y.is_finite() {
-                return None;
-            }
-            if (y - last).abs() < tol {
-                calm += 1;
-                if calm >= need {
-                    return Some(y);
-                }
-            } else {
-                calm = 0;
-            }
-            last = y;
-        }
-        None
+        settle(self.y_scale.mean, tol, need, max_steps, || {
+            self.simulate_step(&mut st, u).y
+        })
     }
 }
 

@@ -252,16 +252,7 @@ impl NnsysidModel<'_> {
     }
 }
 
-/// `a` in f32 (rounded to nearest), for `const` items.
-pub const fn to_f32<const N: usize>(a: &[f64; N]) -> [f32; N] {
-    let mut out = [0.0f32; N];
-    let mut i = 0;
-    while i < N {
-        out[i] = a[i] as f32;
-        i += 1;
-    }
-    out
-}
+pub use crate::scalar::to_f32;
 
 /// Turns a failed `const` build into a compile error naming the rule.
 pub const fn build_error(e: NarmaxError) -> ! {
@@ -540,24 +531,10 @@ impl<const F: usize, const H: usize> NarxF32<F, H> {
     /// Free-run output settled under constant `u` (see [`super::Narmax::steady_output`]).
     pub fn steady_output(&self, u: f32, tol: f32, max_steps: usize) -> Option<f32> {
         let mut st = self.state_at(u, self.y_mean);
-        let (mut last, mut calm) = (self.y_mean, 0);
         let need = self.lags.max_lag().max(1);
-        for _ in 0..max_steps {
-            let y = self.simulate_step(&mut st, u).y;
-            if !y.is_finite() {
-                return None;
-            }
-            if (y - last).abs() < tol {
-                calm += 1;
-                if calm >= need {
-                    return Some(y);
-                }
-            } else {
-                calm = 0;
-            }
-            last = y;
-        }
-        None
+        super::settle(self.y_mean, tol, need, max_steps, || {
+            self.simulate_step(&mut st, u).y
+        })
     }
 }
 

@@ -146,9 +146,9 @@ impl BenchParams<f64> {
     /// built with it holds f32 data and the target does no f64 arithmetic for it.
     pub const fn to_f32(&self) -> BenchParams<f32> {
         BenchParams {
-            gamma: round_to_f32(&self.gamma),
-            alpha: round_to_f32(&self.alpha),
-            beta: round_to_f32(&self.beta),
+            gamma: crate::scalar::to_f32(&self.gamma),
+            alpha: crate::scalar::to_f32(&self.alpha),
+            beta: crate::scalar::to_f32(&self.beta),
             pipe_k1: self.pipe_k1 as f32,
             valve_k2: self.valve_k2 as f32,
             static_head_c_mca: self.static_head_c_mca as f32,
@@ -162,17 +162,6 @@ impl BenchParams<f32> {
     /// The paper's coefficients rounded to f32 (`BenchParams::<f64>::PAPER.to_f32()`, units
     /// as in the fields): compile-time data.
     pub const PAPER: Self = BenchParams::<f64>::PAPER.to_f32();
-}
-
-/// Each element rounded to the nearest f32, at compile time when used in a `const`.
-const fn round_to_f32<const N: usize>(a: &[f64; N]) -> [f32; N] {
-    let mut out = [0.0f32; N];
-    let mut i = 0;
-    while i < N {
-        out[i] = a[i] as f32;
-        i += 1;
-    }
-    out
 }
 
 /// `const fn` twins of [`BenchParams::validate`] and [`BenchParams::accel_rpm_per_s_per_pct`]

@@ -148,3 +148,14 @@ impl Real for f64 {
         libm::exp(self)
     }
 }
+
+/// `a` with each element rounded to the nearest f32; `const`, for compile-time data.
+pub const fn to_f32<const N: usize>(a: &[f64; N]) -> [f32; N] {
+    let mut out = [0.0f32; N];
+    let mut i = 0;
+    while i < N {
+        out[i] = a[i] as f32;
+        i += 1;
+    }
+    out
+}
