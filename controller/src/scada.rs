@@ -95,7 +95,7 @@ pub enum Arithmetic {
     /// f32 forward pass.
     #[default]
     F32 = 0,
-    /// Fixed point (`NarmaxQ`).
+    /// Fixed point (the Q15 pass, `NarxQ15`).
     Fixed = 1,
 }
 

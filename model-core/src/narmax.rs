@@ -11,10 +11,10 @@
 //! hidden × (inputs + 1) with the bias last, `W2` is 1 × (hidden + 1) with the bias last, as
 //! NNSYSID stores them.
 //!
-//! Shapes: `N` (regressors) and `H` (hidden units) are const generics that bound the model:
-//! the firmware instantiates them exactly (`Narmax<f32, 12, 7>` for the paper's pressure
-//! model), the host generously; the model's own lags are checked against them when it is
-//! built. History is kept in fixed-size shift registers: no allocation.
+//! Shapes: `N` (regressors) and `H` (hidden units) are const generics that bound the model; the
+//! model's own lags are checked against them when it is built. History is kept in fixed-size
+//! shift registers: no allocation. This is the generic pass (the host's, any lags); the
+//! firmware runs the MCU passes of [`mcu`], built at compile time.
 //!
 //! Two ways to run it: **free-run simulation** ([`Narmax::simulate_step`]: past model outputs
 //! fed back, error inputs zero), and **one-step-ahead prediction** ([`Narmax::predict_step`]:
