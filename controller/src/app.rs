@@ -173,11 +173,9 @@ impl<const F: usize, const H: usize> NarmaxModel<F, H> {
 
     /// One sample: one-step-ahead with a measurement, free run without.
     fn step(&mut self, arith: Arithmetic, u: f32, measured: Option<f32>) -> NarmaxOutput<f32> {
-        let out = match (arith, measured) {
-            (Arithmetic::F32, Some(y)) => self.float.predict_step(&mut self.st, u, y),
-            (Arithmetic::F32, None) => self.float.simulate_step(&mut self.st, u),
-            (Arithmetic::Fixed, Some(y)) => self.fixed.predict_step(&mut self.st_q, u, y),
-            (Arithmetic::Fixed, None) => self.fixed.simulate_step(&mut self.st_q, u),
+        let out = match arith {
+            Arithmetic::F32 => self.float.step(&mut self.st, u, measured),
+            Arithmetic::Fixed => self.fixed.step(&mut self.st_q, u, measured),
         };
         self.last = out.y;
         out

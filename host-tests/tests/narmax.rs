@@ -196,9 +196,10 @@ fn fixed_point_one_step_error_within_its_stated_bound() {
         let (r, _) = models(lags, hidden, seed, w);
         let (u, y) = data(seed + 20, 6000);
         let w1: Vec<f64> = r.w1.iter().flatten().copied().collect();
-        let q: NarxQ15<8, 8> = NarxQ15::new(&spec(&r, &w1, range_of(&u), range_of(&y))).unwrap();
+        let model = spec(&r, &w1, range_of(&u), range_of(&y));
+        let q: NarxQ15<8, 8> = NarxQ15::new(&model).unwrap();
         let reference = r.one_step(&u, &y, y[0]);
-        let bound = q.one_step_error_bound() * r.y_scale.1;
+        let bound = NarxQ15::<8, 8>::one_step_error_bound(&model).unwrap() * r.y_scale.1;
         let mut st = q.state_at(u[0] as f32, y[0] as f32);
         let mut worst: f64 = 0.0;
         for t in 0..u.len() {

@@ -497,18 +497,34 @@ impl<const F: usize, const H: usize> NarxF32<F, H> {
         (st.0.y_clamped & self.used_y) | (st.0.u_clamped & self.used_u) != 0
     }
 
-    /// Free-run step: takes u(t) (%), returns ŷ(t) (physical) and feeds it back.
-    #[inline]
-    pub fn simulate_step(&self, st: &mut NarxF32State<F>, u: f32) -> NarmaxOutput<f32> {
+    /// One step: takes u(t) (%), returns ŷ(t) (physical) predicted from the past, then
+    /// stores y(t): the measurement if there is one (one-step-ahead), ŷ(t) if not (free run).
+    /// One body for both, so a caller that does both holds one copy of the network.
+    #[inline(always)]
+    pub fn step(
+        &self,
+        st: &mut NarxF32State<F>,
+        u: f32,
+        y_measured: Option<f32>,
+    ) -> NarmaxOutput<f32> {
         let z = self.network(st);
         let clamped = self.clamped(st);
         let (zu, cu) = enter_f32(u, self.u_gain, self.u_offset, self.u_range);
-        let (zy, cy) = clamp_f32(z, self.y_range);
+        let (zy, cy) = match y_measured {
+            Some(y) => enter_f32(y, self.y_gain, self.y_offset, self.y_range),
+            None => clamp_f32(z, self.y_range),
+        };
         st.0.push([zy, zu], cy, cu);
         NarmaxOutput {
             y: z * self.y_std + self.y_mean,
             clamped,
         }
+    }
+
+    /// Free-run step: takes u(t) (%), returns ŷ(t) (physical) and feeds it back.
+    #[inline]
+    pub fn simulate_step(&self, st: &mut NarxF32State<F>, u: f32) -> NarmaxOutput<f32> {
+        self.step(st, u, None)
     }
 
     /// One-step-ahead step: takes u(t) and the measured y(t), returns ŷ(t) from the past.
@@ -519,13 +535,7 @@ impl<const F: usize, const H: usize> NarxF32<F, H> {
         u: f32,
         y_measured: f32,
     ) -> NarmaxOutput<f32> {
-        let z = self.network(st);
-        let clamped = self.clamped(st);
-        self.seed(st, u, y_measured);
-        NarmaxOutput {
-            y: z * self.y_std + self.y_mean,
-            clamped,
-        }
+        self.step(st, u, Some(y_measured))
     }
 
     /// Free-run output settled under constant `u` (see [`super::Narmax::steady_output`]).
@@ -565,12 +575,8 @@ pub fn tanh_q15(x_q16: i32) -> i16 {
 pub struct NarxQ15<const F: usize, const H: usize> {
     lags: Lags,
     /// Row j, frame k: mantissas of (y, u), packed low/high.
-    w1: [[u32; F]; H],
-    /// Row j's bias in accumulator units.
-    b1: [i32; H],
-    /// Right shift from row j's accumulator to Q16, minus 1 (see [`round_shift`]).
-    shift1: [u32; H],
-    w2: [i32; H],
+    /// Per hidden unit, everything its step reads, side by side (one base address).
+    rows: [QRow<F>; H],
     b2: i32,
     /// Right shift from the output accumulator to y's Q15 code, minus 1.
     shift2: u32,
@@ -586,21 +592,39 @@ pub struct NarxQ15<const F: usize, const H: usize> {
     y_lsb: f32,
     used_y: u32,
     used_u: u32,
-    /// Hidden exponents and output exponent (kept for the error bound).
-    e1: [i32; H],
+}
+
+/// What the one-step error bound needs of a quantisation (host-side: kept out of the pass, so
+/// the firmware's statics carry none of it).
+#[derive(Debug, Clone, Copy)]
+struct BoundTerms<const H: usize> {
+    /// Output exponent.
     e2: i32,
-    /// Half-widths of the scaled ranges of y and u (for the error bound).
-    h: [f64; 2],
-    /// |w2| and row L1 norms of the folded weights, real units (for the error bound).
+    /// Half-width of y's scaled range.
+    h_y: f64,
+    /// |w2| and row L1 norms of the folded weights, real units.
     w2_abs: [f64; H],
     w1_l1: [f64; H],
-    /// Largest |physical output| / y's std the ranges allow (for the error bound).
+    /// Largest |physical output| / y's std the ranges allow.
     z_max: f64,
     /// Exact rounding of each hidden row (Σ|Δw| + |Δb|, pre-activation units) and of the
-    /// output layer (Σ|Δw2| per tanh LSB + |Δb2|, code units): for the error bound.
+    /// output layer (Σ|Δw2| per tanh LSB + |Δb2|, code units).
     qerr1: [f64; H],
     qerr2: f64,
     hidden: usize,
+}
+
+/// One hidden unit of [`NarxQ15`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct QRow<const F: usize> {
+    /// Frame k: mantissas of (y, u), packed low/high.
+    w: [u32; F],
+    /// Bias in accumulator units.
+    bias: i32,
+    /// Right shift from the accumulator to Q16, minus 1 (see [`round_shift`]).
+    shift: u32,
+    /// Output-layer mantissa.
+    w2: i32,
 }
 
 /// History of a running [`NarxQ15`]: frames of Q15 codes, y low, u high.
@@ -675,6 +699,14 @@ impl<const F: usize, const H: usize> NarxQ15<F, H> {
     /// row's bias plus the largest weighted input reaches 2^14 (tanh is flat long before) or
     /// the output layer cannot be put in 16-bit mantissas.
     pub const fn new(m: &NnsysidModel) -> Result<Self, NarmaxError> {
+        match Self::quantise(m) {
+            Ok((pass, _)) => Ok(pass),
+            Err(e) => Err(e),
+        }
+    }
+
+    /// [`Self::new`] and what the error bound needs of it.
+    const fn quantise(m: &NnsysidModel) -> Result<(Self, BoundTerms<H>), NarmaxError> {
         if let Err(e) = m.check(F, H) {
             return Err(e);
         }
@@ -684,7 +716,6 @@ impl<const F: usize, const H: usize> NarxQ15<F, H> {
         let mut w1 = [[0u32; F]; H];
         let mut b1 = [0i32; H];
         let mut shift1 = [0u32; H];
-        let mut e1 = [0i32; H];
         let mut w1_l1 = [0.0f64; H];
         let mut qerr1 = [0.0f64; H];
         let mut j = 0;
@@ -716,7 +747,6 @@ impl<const F: usize, const H: usize> NarxQ15<F, H> {
             }
             b1[j] = bias_q as i32;
             shift1[j] = (13 - e) as u32;
-            e1[j] = e;
             // In pre-activation units: weights act on |q/32768| ≤ 1, the bias as is.
             qerr1[j] = err;
             j += 1;
@@ -737,12 +767,25 @@ impl<const F: usize, const H: usize> NarxQ15<F, H> {
             return Err(NarmaxError::FixedRange);
         };
         let (us, ys) = (m.u_scale, m.y_scale);
-        Ok(Self {
+        let mut rows = [QRow {
+            w: [0; F],
+            bias: 0,
+            shift: 0,
+            w2: 0,
+        }; H];
+        let mut j = 0;
+        while j < H {
+            rows[j] = QRow {
+                w: w1[j],
+                bias: b1[j],
+                shift: shift1[j],
+                w2: w2[j],
+            };
+            j += 1;
+        }
+        let pass = Self {
             lags: m.lags,
-            w1,
-            b1,
-            shift1,
-            w2,
+            rows,
             b2: b2q as i32,
             shift2: (14 - e2) as u32,
             out_gain: (ys.std * h[0] * pow2(e2 - 30)) as f32,
@@ -754,16 +797,18 @@ impl<const F: usize, const H: usize> NarxQ15<F, H> {
             y_lsb: (ys.std * h[0] / 32768.0) as f32,
             used_y: m.used(0),
             used_u: m.used(1),
-            e1,
+        };
+        let bound = BoundTerms {
             e2,
-            h,
+            h_y: h[0],
             w2_abs,
             w1_l1,
             z_max: abs(ys.mean / ys.std) + abs(c[0]) + h[0],
             qerr1,
             qerr2,
             hidden: m.hidden,
-        })
+        };
+        Ok((pass, bound))
     }
 
     /// [`Self::new`] for a `static`: a bad model stops the build with the rule it broke.
@@ -799,13 +844,14 @@ impl<const F: usize, const H: usize> NarxQ15<F, H> {
         let x = st.0.window();
         let mut out = self.b2;
         for j in 0..H {
-            let w = &self.w1[j];
-            let mut acc = self.b1[j];
+            let row = &self.rows[j];
+            let w = &row.w;
+            let mut acc = row.bias;
             unrolled!(F, |k| {
                 acc = smlad(w[k], x[k], acc);
             });
-            let t = tanh_q15(round_shift(acc, self.shift1[j]));
-            out = out.wrapping_add(self.w2[j] * i32::from(t));
+            let t = tanh_q15(round_shift(acc, row.shift));
+            out = out.wrapping_add(row.w2 * i32::from(t));
         }
         out
     }
@@ -823,22 +869,36 @@ impl<const F: usize, const H: usize> NarxQ15<F, H> {
         }
     }
 
-    /// Free-run step: takes u(t) (%), returns ŷ(t) (physical) and feeds its code back.
-    #[inline]
-    pub fn simulate_step(&self, st: &mut NarxQ15State<F>, u: f32) -> NarmaxOutput<f32> {
+    /// One step: takes u(t) (%), returns ŷ(t) (physical) predicted from the past, then
+    /// stores y(t): the measurement's code if there is one (one-step-ahead), ŷ(t)'s if not
+    /// (free run). One body for both, so a caller that does both holds one copy.
+    #[inline(always)]
+    pub fn step(
+        &self,
+        st: &mut NarxQ15State<F>,
+        u: f32,
+        y_measured: Option<f32>,
+    ) -> NarmaxOutput<f32> {
         let acc = self.network(st);
         let clamped = self.clamped(st);
         let (qu, cu) = enter_q15(u, self.u_gain, self.u_offset);
-        let code = round_shift(acc, self.shift2);
-        let (qy, cy) = if code > 32767 {
-            (i16::MAX, true)
-        } else if code < -32768 {
-            (i16::MIN, true)
-        } else {
-            (code as i16, false)
+        let (qy, cy) = match y_measured {
+            Some(y) => enter_q15(y, self.y_gain, self.y_offset),
+            None => {
+                // Saturated to i16 (one `SSAT`); clamped if that changed it.
+                let code = round_shift(acc, self.shift2);
+                let sat = code.clamp(-32768, 32767);
+                (sat as i16, sat != code)
+            }
         };
         st.0.push(pack(qy, qu), cy, cu);
         self.output(acc, clamped)
+    }
+
+    /// Free-run step: takes u(t) (%), returns ŷ(t) (physical) and feeds its code back.
+    #[inline]
+    pub fn simulate_step(&self, st: &mut NarxQ15State<F>, u: f32) -> NarmaxOutput<f32> {
+        self.step(st, u, None)
     }
 
     /// One-step-ahead step: takes u(t) and the measured y(t), returns ŷ(t) from the past.
@@ -849,10 +909,7 @@ impl<const F: usize, const H: usize> NarxQ15<F, H> {
         u: f32,
         y_measured: f32,
     ) -> NarmaxOutput<f32> {
-        let acc = self.network(st);
-        let clamped = self.clamped(st);
-        self.seed(st, u, y_measured);
-        self.output(acc, clamped)
+        self.step(st, u, Some(y_measured))
     }
 
     /// Free-run output settled under constant `u`: successive outputs within 4 LSBs of y's
@@ -886,20 +943,24 @@ impl<const F: usize, const H: usize> NarxQ15<F, H> {
     /// biases', the accumulator's to Q16, [`TANH_Q15_MAX_ERROR`], propagated through |w2|; the
     /// output layer's mantissas and bias; the f32 conversion of the accumulator and of the
     /// physical output.
-    pub fn one_step_error_bound(&self) -> f64 {
+    ///
+    /// A function of the model (it quantises it again, as [`Self::new`] does): the pass
+    /// itself carries nothing of it.
+    pub fn one_step_error_bound(m: &NnsysidModel) -> Result<f64, NarmaxError> {
+        let b = Self::quantise(m)?.1;
         let half = 0.51 / 32768.0;
-        let (h, e2) = (self.h[0], f64::from(self.e2));
+        let (h, e2) = (b.h_y, f64::from(b.e2));
         let mut total = 0.0;
-        for j in 0..self.hidden {
+        for j in 0..b.hidden {
             // Weights and bias: their exact rounding (weights act on |q/32768| ≤ 1);
             // regressors: ½ LSB each through the folded weights; Q16: ½ of 2^-16.
-            let da = self.qerr1[j] + self.w1_l1[j] * half + libm::exp2(-17.0);
-            total += self.w2_abs[j] * (da + TANH_Q15_MAX_ERROR);
+            let da = b.qerr1[j] + b.w1_l1[j] * half + libm::exp2(-17.0);
+            total += b.w2_abs[j] * (da + TANH_Q15_MAX_ERROR);
         }
         // Output layer: its exact rounding in code units (mantissas act on |T| ≤ 32767, the
         // bias in code units), to scaled units; the f32 conversion of the accumulator
         // (≤ 2^31 · 2^-24 accumulator units) and of the physical output.
-        total + self.qerr2 * h + h * libm::exp2(e2 - 30.0) * 128.0 + self.z_max * libm::exp2(-22.0)
+        Ok(total + b.qerr2 * h + h * libm::exp2(e2 - 30.0) * 128.0 + b.z_max * libm::exp2(-22.0))
     }
 }
 
@@ -1099,13 +1160,14 @@ mod tests {
         let w1 = [3.0, -3.0, 3.0, -3.0, 3.0, 10.0];
         let m = model(LAGS, &w1, &[0.9, 0.1]);
         let q: NarxQ15<4, 1> = NarxQ15::new(&m).unwrap();
-        let l1: i64 = q.w1[0]
+        let l1: i64 = q.rows[0]
+            .w
             .iter()
             .map(|&p| {
                 i64::from((p as i16).unsigned_abs()) + i64::from(((p >> 16) as i16).unsigned_abs())
             })
             .sum();
-        assert!(i64::from(q.b1[0]).abs() + 32768 * l1 <= i64::from(i32::MAX));
+        assert!(i64::from(q.rows[0].bias).abs() + 32768 * l1 <= i64::from(i32::MAX));
         // Inputs at both ends: finite and within tanh's range.
         let mut st = q.state_at(85.0, 5.0);
         for k in 0..20 {
@@ -1139,7 +1201,7 @@ mod tests {
             f.state_at(30.0, 2.0),
             q.state_at(30.0, 2.0),
         );
-        let bound = q.one_step_error_bound();
+        let bound = NarxQ15::<3, 4>::one_step_error_bound(&m).unwrap();
         for t in 0..300 {
             let u = 10.0 + (t * 37 % 71) as f64;
             let y = 1.0 + (t * 13 % 29) as f64 / 10.0;
