@@ -142,26 +142,28 @@ pub mod parts {
         Ok(())
     }
 
-    /// The NARMAX models' f32 passes (the firmware's statics): free-run and one-step-ahead.
-    pub fn narmax_f32() -> Result<(), Error> {
-        let (p, q) = (black_box(&pressure::F32), black_box(&flow::F32));
-        let (mut sp, mut sq) = (p.state_at(50.0, 2.6), q.state_at(50.0, 15.8));
-        black_box(p.simulate_step(&mut sp, black_box(55.0)));
-        black_box(p.predict_step(&mut sp, black_box(55.0), black_box(2.7)));
-        black_box(q.simulate_step(&mut sq, black_box(55.0)));
-        black_box(q.predict_step(&mut sq, black_box(55.0), black_box(16.0)));
-        Ok(())
+    /// Both models of one pass (`F32` or `Q15`, the firmware's statics): a free-run and a
+    /// one-step-ahead step each.
+    macro_rules! step_both {
+        ($pass:ident) => {{
+            let (p, q) = (black_box(&pressure::$pass), black_box(&flow::$pass));
+            let (mut sp, mut sq) = (p.state_at(50.0, 2.6), q.state_at(50.0, 15.8));
+            black_box(p.simulate_step(&mut sp, black_box(55.0)));
+            black_box(p.predict_step(&mut sp, black_box(55.0), black_box(2.7)));
+            black_box(q.simulate_step(&mut sq, black_box(55.0)));
+            black_box(q.predict_step(&mut sq, black_box(55.0), black_box(16.0)));
+            Ok(())
+        }};
     }
 
-    /// The NARMAX models' Q15 passes (the firmware's statics): free-run and one-step-ahead.
+    /// The NARMAX models' f32 passes.
+    pub fn narmax_f32() -> Result<(), Error> {
+        step_both!(F32)
+    }
+
+    /// The NARMAX models' Q15 passes.
     pub fn narmax_fixed() -> Result<(), Error> {
-        let (p, q) = (black_box(&pressure::Q15), black_box(&flow::Q15));
-        let (mut sp, mut sq) = (p.state_at(50.0, 2.6), q.state_at(50.0, 15.8));
-        black_box(p.simulate_step(&mut sp, black_box(55.0)));
-        black_box(p.predict_step(&mut sp, black_box(55.0), black_box(2.7)));
-        black_box(q.simulate_step(&mut sq, black_box(55.0)));
-        black_box(q.predict_step(&mut sq, black_box(55.0), black_box(16.0)));
-        Ok(())
+        step_both!(Q15)
     }
 
     /// The observer (f32) and the alarm monitor: built, one update each.

@@ -23,7 +23,7 @@ use controller::scada::Mode;
 use core::fmt::Write;
 use core::hint::black_box;
 use cortex_m_rt::entry;
-use cortex_m_semihosting::{debug, hio};
+use cortex_m_semihosting::hio;
 use mcu_bench::plain::PlainNarmax;
 use mcu_bench::{empty, inputs, models, plain_model, start_counter, Cost};
 use model_core::dsp::{smlad, smlad_portable};
@@ -413,11 +413,5 @@ fn main() -> ! {
         Ok(mut out) => run(&mut out).is_ok(),
         Err(()) => false,
     };
-    debug::exit(if ok {
-        debug::EXIT_SUCCESS
-    } else {
-        debug::EXIT_FAILURE
-    });
-    #[allow(clippy::empty_loop)]
-    loop {}
+    mcu_bench::parts::exit(ok)
 }

@@ -94,36 +94,7 @@ impl<T: Real> BenchParams<T> {
     /// Checks every value: all finite, α1 < 0 (the pump head falls at high flow, so the flow
     /// balance always has a bounded largest root), k1 ≥ 0, k2 ≥ 0, J > 0, nominal torque > 0.
     pub fn validate(&self) -> Result<(), BenchError> {
-        let scalars = [
-            self.pipe_k1,
-            self.valve_k2,
-            self.static_head_c_mca,
-            self.inertia_kg_m2,
-            self.nominal_torque_nm,
-        ];
-        let all = self
-            .gamma
-            .iter()
-            .chain(self.alpha.iter())
-            .chain(self.beta.iter())
-            .chain(scalars.iter());
-        for &x in all {
-            if !x.is_finite() {
-                return Err(BenchError::InvalidParameter("non-finite coefficient"));
-            }
-        }
-        if !(self.alpha[0] < T::ZERO) {
-            return Err(BenchError::InvalidParameter("alpha1 must be negative"));
-        }
-        if self.pipe_k1 < T::ZERO || self.valve_k2 < T::ZERO {
-            return Err(BenchError::InvalidParameter("k1 and k2 must be >= 0"));
-        }
-        if !(self.inertia_kg_m2 > T::ZERO) || !(self.nominal_torque_nm > T::ZERO) {
-            return Err(BenchError::InvalidParameter(
-                "inertia and nominal torque must be > 0",
-            ));
-        }
-        Ok(())
+        T::validate_bench(self)
     }
 }
 

@@ -8,6 +8,7 @@
 //! coefficients inside the fitted range (see [`crate::flow`]).
 
 use crate::whitebox::WhiteBox;
+use crate::{BenchError, BenchParams};
 use core::fmt::Debug;
 use core::ops::{Add, AddAssign, Div, Mul, Neg, Sub};
 
@@ -51,10 +52,20 @@ pub trait Real:
     /// `WhiteBox::<f64>::PAPER`): compile-time data, behind [`WhiteBox::paper`] and
     /// [`crate::BenchParams::paper`].
     const PAPER_BENCH: WhiteBox<Self>;
+    /// [`BenchParams::validate`] for this type: its `const fn` (one set of rules for both).
+    fn validate_bench(p: &BenchParams<Self>) -> Result<(), BenchError>;
+    /// [`WhiteBox::new`] for this type: its `const fn`.
+    fn new_bench(p: BenchParams<Self>) -> Result<WhiteBox<Self>, BenchError>;
 }
 
 impl Real for f32 {
     const PAPER_BENCH: WhiteBox<Self> = WhiteBox::<f32>::PAPER;
+    fn validate_bench(p: &BenchParams<Self>) -> Result<(), BenchError> {
+        p.validate_const()
+    }
+    fn new_bench(p: BenchParams<Self>) -> Result<WhiteBox<Self>, BenchError> {
+        WhiteBox::<f32>::new_const(p)
+    }
     const ZERO: Self = 0.0;
     const ONE: Self = 1.0;
     const EPSILON: Self = f32::EPSILON;
@@ -108,6 +119,12 @@ impl Real for f32 {
 
 impl Real for f64 {
     const PAPER_BENCH: WhiteBox<Self> = WhiteBox::<f64>::PAPER;
+    fn validate_bench(p: &BenchParams<Self>) -> Result<(), BenchError> {
+        p.validate_const()
+    }
+    fn new_bench(p: BenchParams<Self>) -> Result<WhiteBox<Self>, BenchError> {
+        WhiteBox::<f64>::new_const(p)
+    }
     const ZERO: Self = 0.0;
     const ONE: Self = 1.0;
     const EPSILON: Self = f64::EPSILON;

@@ -207,10 +207,10 @@ const_white_box!(f32);
 const_white_box!(f64);
 
 impl<T: Real> WhiteBox<T> {
-    /// Validates `params` and builds the model.
+    /// Validates `params` and builds the model (the `const fn` [`WhiteBox::new_const`] of
+    /// `T`: one construction for run time and compile time).
     pub fn new(params: BenchParams<T>) -> Result<Self, BenchError> {
-        params.validate()?;
-        Ok(Self::from_valid(params))
+        T::new_bench(params)
     }
 
     /// The paper's bench: a copy of compile-time data (`WhiteBox::<f32>::PAPER` or
@@ -218,17 +218,6 @@ impl<T: Real> WhiteBox<T> {
     #[inline]
     pub fn paper() -> Self {
         T::PAPER_BENCH
-    }
-
-    fn from_valid(params: BenchParams<T>) -> Self {
-        let system_k = params.pipe_k1 + params.valve_k2 * params.valve_k2;
-        Self {
-            system_k,
-            accel: params.accel_rpm_per_s_per_pct(),
-            balance_poly: balance_poly(&params.alpha, system_k, params.static_head_c_mca),
-            params,
-            load_generation: 0,
-        }
     }
 
     /// rpm/s of speed change per % of torque surplus

@@ -13,13 +13,12 @@
 //!   no image over its flash or RAM budget ([`Board::budget`]).
 
 use super::{build_firmware, cargo, field, firmware_elf, num, root, run, target_dir, Board};
-use super::{Result, QEMU_TIMEOUT_S, TARGET};
+use super::{Result, TARGET};
 use object::{Object, ObjectSection, ObjectSymbol, SectionFlags, SymbolKind};
 use serde::Serialize;
 use std::collections::{BTreeMap, HashSet};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
 use std::time::Instant;
 
 /// How much a kernel may cost over its figure in `bench/baseline.json` before the bench fails
@@ -324,48 +323,6 @@ fn group(n: i64) -> String {
     }
 }
 
-/// The bench image's output under QEMU (`-icount shift=0`: deterministic).
-fn qemu_run(elf: &Path) -> Result<String> {
-    let start = Instant::now();
-    let out = Command::new("timeout")
-        .arg(QEMU_TIMEOUT_S.to_string())
-        .args([
-            "qemu-system-arm",
-            "-M",
-            "netduinoplus2",
-            "-icount",
-            "shift=0",
-        ])
-        .args([
-            "-nographic",
-            "-semihosting-config",
-            "enable=on,target=native",
-        ])
-        .arg("-kernel")
-        .arg(elf)
-        .stdin(Stdio::null())
-        .stderr(Stdio::inherit())
-        .output()
-        .map_err(|e| {
-            format!("cannot start qemu-system-arm (apt-get install qemu-system-arm): {e}")
-        })?;
-    let text = String::from_utf8_lossy(&out.stdout).into_owned();
-    eprintln!(
-        "    qemu {}: {:.1} s, {}",
-        elf.file_name().unwrap_or_default().to_string_lossy(),
-        start.elapsed().as_secs_f64(),
-        out.status
-    );
-    if !out.status.success() {
-        return Err(format!(
-            "{} in QEMU exited with {}:\n{text}",
-            elf.display(),
-            out.status
-        ));
-    }
-    Ok(text)
-}
-
 /// A figure of the checked-in baseline: `kernels.<name>`, else the top-level key.
 fn baseline_kernel(baseline: &serde_json::Value, name: &str) -> Option<f64> {
     baseline
@@ -422,13 +379,13 @@ pub fn run_bench(o: &Options) -> Result {
         let elf = bin_dir.join(bin);
         // Each probe runs its parts once and must exit 0 (a probe that faults measures
         // nothing).
-        qemu_run(&elf)?;
+        crate::qemu_output(&elf, &[])?;
         let (size, _, _) = read_elf(&elf, 0)?;
         parts.insert(*key, size);
         part_sizes.push(size);
     }
     eprintln!("==> mcu-bench in QEMU (netduinoplus2, -icount shift=0)");
-    let rows = parse_rows(&qemu_run(&bin_dir.join("mcu-bench"))?)?;
+    let rows = parse_rows(&crate::qemu_output(&bin_dir.join("mcu-bench"), &[])?)?;
     let (kernels, empty) = kernels(&rows)?;
     let rounded: BTreeMap<String, i64> = kernels
         .iter()

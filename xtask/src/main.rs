@@ -159,7 +159,7 @@ fn qemu_command(elf: &Path, args: &[String]) -> Command {
     cmd
 }
 
-/// Runs the firmware in QEMU to its end, deterministic and faster than real time
+/// Runs an image (the firmware, the bench, a size probe) in QEMU to its end, deterministic and faster than real time
 /// (`-icount shift=0,sleep=off`); returns its standard output.
 fn qemu_output(elf: &Path, args: &[String]) -> Result<String> {
     let start = Instant::now();
@@ -176,15 +176,16 @@ fn qemu_output(elf: &Path, args: &[String]) -> Result<String> {
             format!("cannot start qemu-system-arm (apt-get install qemu-system-arm): {e}")
         })?;
     let text = String::from_utf8_lossy(&out.stdout).into_owned();
+    let name = elf.file_name().unwrap_or_default().to_string_lossy();
     eprintln!(
-        "    qemu {}: {:.1} s, {}",
+        "    qemu {name} {}: {:.1} s, {}",
         args.join(" "),
         start.elapsed().as_secs_f64(),
         out.status
     );
     if !out.status.success() {
         return Err(format!(
-            "firmware in QEMU exited with {}:\n{text}",
+            "{name} in QEMU exited with {}:\n{text}",
             out.status
         ));
     }
