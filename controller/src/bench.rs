@@ -13,7 +13,8 @@
 //! (±3.46 σ), cheap on an MCU without `log`/`cos`, and the same sequence on host and target.
 
 use crate::analog::{LoopConfig, VALID_HIGH_MA, VALID_LOW_MA};
-use crate::app::Io;
+use crate::control::{Config, Controller, Error, Inputs, NarmaxModel, Outputs};
+use crate::link::{ScadaLink, VfdLink, VfdPort};
 use crate::vfd::{Frame, VfdMap};
 use crate::vfdsim::{DriveValues, VfdSim};
 use model_core::excitation::SplitMix64;
@@ -271,37 +272,115 @@ impl VirtualIo {
     }
 }
 
-impl Io for VirtualIo {
-    fn pressure_code(&mut self) -> u16 {
-        self.bench.pressure_code()
-    }
-    fn flow_code(&mut self) -> u16 {
-        self.bench.flow_code()
-    }
-    fn set_torque_ref(&mut self, pct: f32) {
+impl VirtualIo {
+    /// Sets the torque output, % (NaN → 0, clamped to 0..=100).
+    pub fn set_torque_ref(&mut self, pct: f32) {
         self.torque_pct = if pct.is_nan() {
             0.0
         } else {
             pct.clamp(0.0, 100.0)
         };
     }
-    fn vfd_send(&mut self, frame: &[u8]) {
+}
+
+/// The simulated drive, in-process: it answers a request at once (taken by the next
+/// [`VfdPort::receive`]); with the link cut it hears nothing.
+impl VfdPort for VirtualIo {
+    fn send(&mut self, frame: &[u8]) {
         if self.link_up {
             // A new request replaces an answer not yet taken, as on a half-duplex line.
             let values = self.drive_values();
             self.drive.handle(frame, &values, &mut self.answer);
         }
     }
-    fn virtual_bench(&mut self, valve_permille: u16, faults: u16) {
-        self.apply(valve_permille, faults);
-    }
-    fn vfd_receive(&mut self, _now_ms: u32, frame: &mut Frame) -> bool {
+    fn receive(&mut self, frame: &mut Frame) -> bool {
         if self.answer.is_empty() {
             return false;
         }
         core::mem::swap(frame, &mut self.answer);
         self.answer.clear();
         true
+    }
+}
+
+/// The controller, its two links and the virtual bench in one process, one millisecond at a
+/// time in the order the firmware's tasks run them (see [`VirtualBoard::tick`]): the host
+/// tests' and the QEMU replay's board.
+#[derive(Debug, Clone)]
+pub struct VirtualBoard<const NP: usize, const HP: usize, const NF: usize, const HF: usize> {
+    /// The real-time core.
+    pub controller: Controller<NP, HP, NF, HF>,
+    /// The SCADA server.
+    pub scada: ScadaLink,
+    /// The VFD master.
+    pub vfd: VfdLink,
+    /// The bench and its drive.
+    pub io: VirtualIo,
+}
+
+impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
+    VirtualBoard<NP, HP, NF, HF>
+{
+    /// The controller, its links and a virtual bench with `bench` offsets, its drive at
+    /// `config.vfd`, all at rest.
+    pub fn new(
+        config: &Config,
+        pressure: NarmaxModel<NP, HP>,
+        flow: NarmaxModel<NF, HF>,
+        bench: VirtualBenchConfig,
+    ) -> Result<Self, Error> {
+        let bench = VirtualBench::new(bench).map_err(Error::Bench)?;
+        Ok(Self {
+            controller: Controller::new(config, pressure, flow)?,
+            scada: ScadaLink::new(config)?,
+            vfd: VfdLink::new(config.vfd)?,
+            io: VirtualIo::new(bench, config.vfd).ok_or(Error::Config("VFD map"))?,
+        })
+    }
+
+    /// The inputs of the next step: the codes due (see [`Controller::samples_due`]), the
+    /// SCADA's commands and the VFD link's status.
+    pub fn inputs(
+        controller: &Controller<NP, HP, NF, HF>,
+        io: &mut VirtualIo,
+        scada: &ScadaLink,
+        vfd: &VfdLink,
+    ) -> Inputs {
+        let (p, q) = controller.samples_due();
+        Inputs {
+            pressure_code: if p { io.bench.pressure_code() } else { 0 },
+            flow_code: if q { io.bench.flow_code() } else { 0 },
+            commands: scada.commands(),
+            vfd: vfd.status(),
+        }
+    }
+
+    /// The control task's part of a millisecond: [`Controller::step`], its outputs to the
+    /// bench (torque, valve, faults), the bench stepped 1 ms, the values published to SCADA.
+    pub fn control(
+        controller: &mut Controller<NP, HP, NF, HF>,
+        io: &mut VirtualIo,
+        inputs: &Inputs,
+    ) -> Result<Outputs, BenchError> {
+        let out = controller.step(inputs);
+        io.set_torque_ref(out.torque_ref_pct);
+        if let Some(b) = out.bench {
+            io.apply(b.valve_permille, b.faults);
+        }
+        io.step_1ms()?;
+        Ok(out)
+    }
+
+    /// One millisecond: the control task's part ([`Self::control`]), then SCADA takes the
+    /// published values and the VFD link its pass at the step's time with the requested
+    /// torque, as the firmware's lower-priority tasks do after each control step.
+    pub fn tick(&mut self) -> Result<Outputs, BenchError> {
+        let inputs = Self::inputs(&self.controller, &mut self.io, &self.scada, &self.vfd);
+        let out = Self::control(&mut self.controller, &mut self.io, &inputs)?;
+        self.scada.publish(&out.published);
+        self.vfd
+            .poll(out.t_ms, out.requested_torque_pct, &mut self.io);
+        Ok(out)
     }
 }
 

@@ -2,8 +2,9 @@
 //! The 1 ms loop on the virtual bench, on the host: operating point, VFD link alarm,
 //! transmitter faults, the profile, the arithmetic switch and the SCADA registers.
 
-use controller::app::{App, AppConfig, Io, LogLine, NarmaxModel};
-use controller::bench::{VirtualBench, VirtualBenchConfig, VirtualIo};
+use controller::bench::{VirtualBenchConfig, VirtualBoard, VirtualIo};
+use controller::control::{Config, LogLine, NarmaxModel};
+use controller::link::VfdPort;
 use controller::scada::{crc16, Mode, Response};
 use controller::vfd::Frame;
 use model_core::WhiteBox;
@@ -14,32 +15,29 @@ mod flow_model;
 #[path = "../../firmware/src/models/pressure.rs"]
 mod pressure_model;
 
-type Loop = App<
+type Board = VirtualBoard<
     { pressure_model::FRAMES },
     { pressure_model::HIDDEN },
     { flow_model::FRAMES },
     { flow_model::HIDDEN },
 >;
 
-fn setup(mode: Mode, setpoint: u16) -> (Loop, VirtualIo) {
-    let cfg = AppConfig {
+fn setup(mode: Mode, setpoint: u16) -> Board {
+    let cfg = Config {
         initial_mode: mode,
         initial_setpoint: setpoint,
         virtual_bench: true,
-        ..AppConfig::bench()
+        ..Config::bench()
     };
     let p = NarmaxModel::new(&pressure_model::F32, &pressure_model::Q15, 50).unwrap();
     let q = NarmaxModel::new(&flow_model::F32, &flow_model::Q15, 100).unwrap();
-    let app = App::new(cfg, p, q).unwrap();
-    let bench = VirtualBench::new(VirtualBenchConfig::default_offsets(7)).unwrap();
-    (app, VirtualIo::new(bench, cfg.vfd).unwrap())
+    Board::new(&cfg, p, q, VirtualBenchConfig::default_offsets(7)).unwrap()
 }
 
-fn run(app: &mut Loop, io: &mut VirtualIo, ms: u32) -> Vec<LogLine> {
+fn run(b: &mut Board, ms: u32) -> Vec<LogLine> {
     let mut logs = vec![];
     for _ in 0..ms {
-        logs.extend(app.tick(io));
-        io.step_1ms().unwrap();
+        logs.extend(b.tick().unwrap().log);
     }
     logs
 }
@@ -50,10 +48,11 @@ fn with_crc(body: &[u8]) -> Vec<u8> {
     f
 }
 
-fn read_inputs(app: &mut Loop) -> Vec<u16> {
+fn read_inputs(b: &mut Board) -> Vec<u16> {
     let mut r = Response::new();
-    let n = app
-        .scada_frame(&with_crc(&[1, 4, 0, 0, 0, 18]), &mut r)
+    let n = b
+        .scada
+        .handle(&with_crc(&[1, 4, 0, 0, 0, 18]), &mut r)
         .unwrap();
     assert_eq!(n, 5 + 36);
     r[3..39]
@@ -68,17 +67,17 @@ fn rel(a: f32, b: f32) -> f32 {
 
 #[test]
 fn manual_50_pct_reaches_the_operating_point_in_3_s() {
-    let (mut app, mut io) = setup(Mode::Stop, 0);
-    run(&mut app, &mut io, 500);
-    assert_eq!(io.torque_ref_pct(), 0.0);
+    let mut b = setup(Mode::Stop, 0);
+    run(&mut b, 500);
+    assert_eq!(b.io.torque_ref_pct(), 0.0);
     // What a SCADA does: setpoint 50 %, manual mode (FC 16).
     let mut r = Response::new();
     let req = with_crc(&[1, 16, 0, 0, 0, 2, 4, 0x13, 0x88, 0, 1]);
-    assert!(app.scada_frame(&req, &mut r).is_some());
-    run(&mut app, &mut io, 3000);
+    assert!(b.scada.handle(&req, &mut r).is_some());
+    run(&mut b, 3000);
     let model = WhiteBox::<f32>::paper();
     let op = model.signals(&model.steady_state(50.0).unwrap());
-    let regs = read_inputs(&mut app);
+    let regs = read_inputs(&mut b);
     let speed = f32::from(regs[6]) / 10.0;
     let p_meas = f32::from(regs[2] as i16) / 1000.0;
     let q_meas = f32::from(regs[3]) / 100.0;
@@ -98,30 +97,33 @@ fn manual_50_pct_reaches_the_operating_point_in_3_s() {
     assert_eq!(regs[0] & 0b1011, 0b1001, "running, VFD link ok, no alarm");
     let vfd_rpm = f32::from(regs[14] as i16) / 10.0;
     assert!(
-        (vfd_rpm - io.bench.signals().speed_rpm).abs() < 2.0,
+        (vfd_rpm - b.io.bench.signals().speed_rpm).abs() < 2.0,
         "VFD speed {vfd_rpm}"
     );
 }
 
 #[test]
 fn vfd_link_loss_forces_zero_torque_until_it_is_back() {
-    let (mut app, mut io) = setup(Mode::Manual, 4000);
-    run(&mut app, &mut io, 200);
-    assert_eq!(io.torque_ref_pct(), 40.0);
-    assert!(!app.vfd().alarm());
-    io.link_up = false;
+    let mut b = setup(Mode::Manual, 4000);
+    run(&mut b, 200);
+    assert_eq!(b.io.torque_ref_pct(), 40.0);
+    assert!(!b.vfd.master().alarm());
+    b.io.link_up = false;
     // 3 exchanges of 3 attempts (request + 2 retries) × 100 ms each.
-    run(&mut app, &mut io, 850);
-    assert!(!app.vfd().alarm(), "two failed exchanges do not raise it");
+    run(&mut b, 850);
+    assert!(
+        !b.vfd.master().alarm(),
+        "two failed exchanges do not raise it"
+    );
     let mut t = 0;
-    while !app.vfd().alarm() {
-        run(&mut app, &mut io, 1);
+    while !b.vfd.master().alarm() {
+        run(&mut b, 1);
         t += 1;
         assert!(t < 200, "no alarm after the third failed exchange");
     }
-    run(&mut app, &mut io, 1);
-    assert_eq!(io.torque_ref_pct(), 0.0);
-    let regs = read_inputs(&mut app);
+    run(&mut b, 1);
+    assert_eq!(b.io.torque_ref_pct(), 0.0);
+    let regs = read_inputs(&mut b);
     assert_eq!(
         regs[0] & 0b100_1010,
         0b100_0010,
@@ -129,24 +131,24 @@ fn vfd_link_loss_forces_zero_torque_until_it_is_back() {
     );
     assert_eq!(regs[1], 0);
     assert_eq!(&regs[14..17], &[0, 0, 0], "no stale drive readings");
-    io.link_up = true;
-    run(&mut app, &mut io, 400);
-    assert!(!app.vfd().alarm());
-    assert_eq!(io.torque_ref_pct(), 40.0);
+    b.io.link_up = true;
+    run(&mut b, 400);
+    assert!(!b.vfd.master().alarm());
+    assert_eq!(b.io.torque_ref_pct(), 40.0);
 }
 
 #[test]
 fn a_transmitter_fault_is_flagged_within_one_sample_and_models_run_on() {
-    let (mut app, mut io) = setup(Mode::Manual, 6000);
-    run(&mut app, &mut io, 3000);
-    let before = read_inputs(&mut app);
-    io.bench.force_pressure_ma = Some(2.0);
-    run(&mut app, &mut io, 50);
-    let regs = read_inputs(&mut app);
+    let mut b = setup(Mode::Manual, 6000);
+    run(&mut b, 3000);
+    let before = read_inputs(&mut b);
+    b.io.bench.force_pressure_ma = Some(2.0);
+    run(&mut b, 50);
+    let regs = read_inputs(&mut b);
     assert_eq!(regs[0] & 0b1_0010, 0b1_0010, "pressure fault and alarm");
     for _ in 0..20 {
-        run(&mut app, &mut io, 50);
-        let r = read_inputs(&mut app);
+        run(&mut b, 50);
+        let r = read_inputs(&mut b);
         let (nx, before_nx) = (r[7] as i16, before[7] as i16);
         assert!(
             (nx - before_nx).abs() < 100,
@@ -154,30 +156,26 @@ fn a_transmitter_fault_is_flagged_within_one_sample_and_models_run_on() {
         );
         assert_eq!(r[12], 0, "no residual during the fault");
     }
-    io.bench.force_pressure_ma = None;
-    run(&mut app, &mut io, 100);
+    b.io.bench.force_pressure_ma = None;
+    run(&mut b, 100);
     assert_ne!(
-        read_inputs(&mut app)[0] & 0b1_0000,
+        read_inputs(&mut b)[0] & 0b1_0000,
         0,
         "2 good samples: not cleared"
     );
-    run(&mut app, &mut io, 50);
-    assert_eq!(read_inputs(&mut app)[0] & 0b1_0010, 0, "cleared after 3");
-    io.bench.force_flow_ma = Some(22.0);
-    run(&mut app, &mut io, 100);
-    assert_eq!(
-        read_inputs(&mut app)[0] & 0b10_0000,
-        0b10_0000,
-        "flow fault"
-    );
+    run(&mut b, 50);
+    assert_eq!(read_inputs(&mut b)[0] & 0b1_0010, 0, "cleared after 3");
+    b.io.bench.force_flow_ma = Some(22.0);
+    run(&mut b, 100);
+    assert_eq!(read_inputs(&mut b)[0] & 0b10_0000, 0b10_0000, "flow fault");
 }
 
 #[test]
 fn profile_logs_once_a_second_and_repeats_from_its_seed() {
-    let (mut a, mut io_a) = setup(Mode::Profile, 0);
-    let (mut b, mut io_b) = setup(Mode::Profile, 0);
-    let la = run(&mut a, &mut io_a, 5001);
-    let lb = run(&mut b, &mut io_b, 5001);
+    let mut a = setup(Mode::Profile, 0);
+    let mut b = setup(Mode::Profile, 0);
+    let la = run(&mut a, 5001);
+    let lb = run(&mut b, 5001);
     assert_eq!(la.len(), 6);
     assert_eq!(la, lb);
     let mut text = String::new();
@@ -195,15 +193,13 @@ fn profile_logs_once_a_second_and_repeats_from_its_seed() {
 
 #[test]
 fn fixed_point_narmax_follows_f32() {
-    let (mut a, mut io_a) = setup(Mode::Profile, 0);
-    let (mut b, mut io_b) = setup(Mode::Profile, 0);
+    let mut a = setup(Mode::Profile, 0);
+    let mut b = setup(Mode::Profile, 0);
     let mut r = Response::new();
-    b.scada_frame(&with_crc(&[1, 6, 0, 2, 0, 1]), &mut r)
+    b.scada
+        .handle(&with_crc(&[1, 6, 0, 2, 0, 1]), &mut r)
         .unwrap();
-    let (la, lb) = (
-        run(&mut a, &mut io_a, 10_001),
-        run(&mut b, &mut io_b, 10_001),
-    );
+    let (la, lb) = (run(&mut a, 10_001), run(&mut b, 10_001));
     assert_eq!(lb[3].arithmetic, controller::scada::Arithmetic::Fixed);
     for (x, y) in la.iter().zip(&lb).skip(1) {
         let (p, pq) = (x.values.narmax_pressure_mca, y.values.narmax_pressure_mca);
@@ -213,9 +209,9 @@ fn fixed_point_narmax_follows_f32() {
 
 #[test]
 fn residuals_are_measured_minus_predicted() {
-    let (mut app, mut io) = setup(Mode::Manual, 7000);
-    run(&mut app, &mut io, 4001);
-    let v = *app.published();
+    let mut b = setup(Mode::Manual, 7000);
+    run(&mut b, 4001);
+    let v = *b.controller.published();
     assert!(
         (v.whitebox_pressure_residual_mca - (v.pressure_mca - v.whitebox_pressure_mca)).abs()
             < 1e-6
@@ -228,45 +224,40 @@ fn residuals_are_measured_minus_predicted() {
 #[test]
 fn loop_state_size() {
     // The loop's state lives on the MCU's stack (or in a static): printed for the README.
-    let n = std::mem::size_of::<Loop>();
-    println!("size_of App (the firmware's loop state): {n} B");
+    let n = std::mem::size_of::<Board>();
+    println!("size_of VirtualBoard (core, links, virtual bench): {n} B");
     assert!(n < 12 * 1024, "{n} B");
 }
 
 /// The virtual bench behind a drive that drops one kind of request (FC 06 writes or FC 03
 /// reads): it never answers them.
-struct OneKindFails {
-    io: VirtualIo,
+struct OneKindFails<'a> {
+    io: &'a mut VirtualIo,
     drop_function: Option<u8>,
 }
 
-impl Io for OneKindFails {
-    fn pressure_code(&mut self) -> u16 {
-        self.io.pressure_code()
-    }
-    fn flow_code(&mut self) -> u16 {
-        self.io.flow_code()
-    }
-    fn set_torque_ref(&mut self, pct: f32) {
-        self.io.set_torque_ref(pct)
-    }
-    fn vfd_send(&mut self, frame: &[u8]) {
+impl VfdPort for OneKindFails<'_> {
+    fn send(&mut self, frame: &[u8]) {
         if frame.get(1).copied() != self.drop_function {
-            self.io.vfd_send(frame)
+            self.io.send(frame)
         }
     }
-    fn vfd_receive(&mut self, now_ms: u32, frame: &mut Frame) -> bool {
-        self.io.vfd_receive(now_ms, frame)
-    }
-    fn virtual_bench(&mut self, valve_permille: u16, faults: u16) {
-        self.io.virtual_bench(valve_permille, faults)
+    fn receive(&mut self, frame: &mut Frame) -> bool {
+        self.io.receive(frame)
     }
 }
 
-fn run_faulty(app: &mut Loop, io: &mut OneKindFails, ms: u32) {
+/// As [`VirtualBoard::tick`], the drive dropping `drop_function`.
+fn run_faulty(b: &mut Board, drop_function: Option<u8>, ms: u32) {
     for _ in 0..ms {
-        app.tick(io);
-        io.io.step_1ms().unwrap();
+        let inputs = Board::inputs(&b.controller, &mut b.io, &b.scada, &b.vfd);
+        let out = Board::control(&mut b.controller, &mut b.io, &inputs).unwrap();
+        b.scada.publish(&out.published);
+        let mut port = OneKindFails {
+            io: &mut b.io,
+            drop_function,
+        };
+        b.vfd.poll(out.t_ms, out.requested_torque_pct, &mut port);
     }
 }
 
@@ -275,17 +266,12 @@ fn run_faulty(app: &mut Loop, io: &mut OneKindFails, ms: u32) {
 #[test]
 fn a_drive_that_takes_no_writes_forces_zero_and_one_that_gives_no_reads_is_flagged() {
     // Writes fail: link alarm, 0 % on the analog output, readings still valid.
-    let (mut app, io) = setup(Mode::Manual, 5000);
-    let mut io = OneKindFails {
-        io,
-        drop_function: None,
-    };
-    run_faulty(&mut app, &mut io, 500);
-    assert_eq!(io.io.torque_ref_pct(), 50.0);
-    io.drop_function = Some(6);
-    run_faulty(&mut app, &mut io, 3000);
-    let regs = read_inputs(&mut app);
-    assert_eq!(io.io.torque_ref_pct(), 0.0, "safe torque");
+    let mut b = setup(Mode::Manual, 5000);
+    run_faulty(&mut b, None, 500);
+    assert_eq!(b.io.torque_ref_pct(), 50.0);
+    run_faulty(&mut b, Some(6), 3000);
+    let regs = read_inputs(&mut b);
+    assert_eq!(b.io.torque_ref_pct(), 0.0, "safe torque");
     assert_eq!(regs[1], 0, "applied torque register");
     assert_eq!(
         regs[0] & 0b100_1010,
@@ -293,44 +279,42 @@ fn a_drive_that_takes_no_writes_forces_zero_and_one_that_gives_no_reads_is_flagg
         "alarm, link not ok, readings valid"
     );
     assert!(regs[14] != 0, "fresh readings are published");
-    io.drop_function = None;
-    run_faulty(&mut app, &mut io, 500);
+    run_faulty(&mut b, None, 500);
     assert_eq!(
-        io.io.torque_ref_pct(),
+        b.io.torque_ref_pct(),
         50.0,
         "back once a write is delivered"
     );
 
     // Reads fail: the reference is delivered (link ok, 50 %), the controller is blind.
-    io.drop_function = Some(3);
-    run_faulty(&mut app, &mut io, 3000);
-    let regs = read_inputs(&mut app);
-    assert_eq!(io.io.torque_ref_pct(), 50.0);
+    run_faulty(&mut b, Some(3), 3000);
+    let regs = read_inputs(&mut b);
+    assert_eq!(b.io.torque_ref_pct(), 50.0);
     assert_eq!(
         regs[0] & 0b100_1010,
         0b100_1010,
         "alarm, link ok, readings invalid"
     );
     assert_eq!(&regs[14..17], &[0, 0, 0], "no stale drive readings");
-    io.drop_function = None;
-    run_faulty(&mut app, &mut io, 500);
-    let regs = read_inputs(&mut app);
+    run_faulty(&mut b, None, 500);
+    let regs = read_inputs(&mut b);
     assert_eq!(regs[0] & 0b100_1010, 0b000_1000, "all clear");
     assert!(regs[14] != 0 && regs[16] != 0, "readings back");
 }
 
-fn write_holding(app: &mut Loop, register: u8, value: u16) {
+fn write_holding(b: &mut Board, register: u8, value: u16) {
     let [hi, lo] = value.to_be_bytes();
     let mut r = Response::new();
     let req = with_crc(&[1, 6, 0, register, hi, lo]);
-    let n = app.scada_frame(&req, &mut r).expect("an answer");
+    let n = b.scada.handle(&req, &mut r).expect("an answer");
     assert_eq!(&r[..n], &req[..], "write of holding {register} echoed");
 }
 
-fn read_observer(app: &mut Loop) -> (f32, f32, f32, u16) {
+fn read_observer(b: &mut Board) -> (f32, f32, f32, u16) {
     let mut r = Response::new();
-    let n = app
-        .scada_frame(&with_crc(&[1, 4, 0, 18, 0, 5]), &mut r)
+    let n = b
+        .scada
+        .handle(&with_crc(&[1, 4, 0, 18, 0, 5]), &mut r)
         .unwrap();
     assert_eq!(n, 5 + 10);
     let w = |i: usize| u16::from_be_bytes([r[3 + 2 * i], r[4 + 2 * i]]);
@@ -348,52 +332,55 @@ fn read_observer(app: &mut Loop) -> (f32, f32, f32, u16) {
 #[test]
 fn the_observer_follows_the_valve_and_the_alarms_follow_injected_faults() {
     use model_core::monitor::{DRY_RUN, LOAD_CHANGED, PRESSURE_TRANSMITTER, VFD_LINK};
-    let (mut app, mut io) = setup(Mode::Manual, 5000);
-    run(&mut app, &mut io, 5000);
-    let (w, q, k2, alarms) = read_observer(&mut app);
-    let truth = io.bench.signals();
+    let mut b = setup(Mode::Manual, 5000);
+    run(&mut b, 5000);
+    let (w, q, k2, alarms) = read_observer(&mut b);
+    let truth = b.io.bench.signals();
     println!(
         "50 %: observer {w} rpm {q} l/s k2 {k2}, bench {} rpm {} l/s k2 {}",
         truth.speed_rpm,
         truth.flow_lps,
-        io.bench.valve_k2()
+        b.io.bench.valve_k2()
     );
     assert_eq!(alarms, 0, "no alarm at the operating point");
     assert!(rel(w, truth.speed_rpm) < 0.01 && rel(q, truth.flow_lps) < 0.01);
-    assert!(rel(k2, io.bench.valve_k2()) < 0.03);
+    assert!(rel(k2, b.io.bench.valve_k2()) < 0.03);
 
-    write_holding(&mut app, 3, 1300);
-    run(&mut app, &mut io, 3000);
-    let (_, q, k2, alarms) = read_observer(&mut app);
+    write_holding(&mut b, 3, 1300);
+    run(&mut b, 3000);
+    let (_, q, k2, alarms) = read_observer(&mut b);
     println!(
         "valve 130 %: observer k2 {k2} (bench {}), flow {q} (bench {})",
-        io.bench.valve_k2(),
-        io.bench.signals().flow_lps
+        b.io.bench.valve_k2(),
+        b.io.bench.signals().flow_lps
     );
-    assert!(rel(k2, io.bench.valve_k2()) < 0.03, "k2 followed the valve");
+    assert!(
+        rel(k2, b.io.bench.valve_k2()) < 0.03,
+        "k2 followed the valve"
+    );
     assert_eq!(alarms, LOAD_CHANGED, "load changed, and only that");
-    write_holding(&mut app, 3, 1000);
-    run(&mut app, &mut io, 3000);
-    assert_eq!(read_observer(&mut app).3, 0, "back to nominal");
+    write_holding(&mut b, 3, 1000);
+    run(&mut b, 3000);
+    assert_eq!(read_observer(&mut b).3, 0, "back to nominal");
 
     for (bit, fault) in [(PRESSURE_TRANSMITTER, 2u16), (VFD_LINK, 8), (DRY_RUN, 1)] {
-        write_holding(&mut app, 4, fault);
-        run(&mut app, &mut io, 4000);
-        let alarms = read_observer(&mut app).3;
+        write_holding(&mut b, 4, fault);
+        run(&mut b, 4000);
+        let alarms = read_observer(&mut b).3;
         println!("fault {fault}: alarms {alarms:#06x}");
         assert!(
             alarms & bit != 0,
             "fault {fault}: alarm {bit:#x} in {alarms:#x}"
         );
-        write_holding(&mut app, 4, 0);
-        run(&mut app, &mut io, 4000);
+        write_holding(&mut b, 4, 0);
+        run(&mut b, 4000);
     }
     // Dry run is latched: it stands after its cause has gone, until SCADA writes "stop".
-    assert!(read_observer(&mut app).3 & DRY_RUN != 0, "latched");
-    write_holding(&mut app, 1, 0);
-    run(&mut app, &mut io, 100);
+    assert!(read_observer(&mut b).3 & DRY_RUN != 0, "latched");
+    write_holding(&mut b, 1, 0);
+    run(&mut b, 100);
     assert_eq!(
-        read_observer(&mut app).3 & DRY_RUN,
+        read_observer(&mut b).3 & DRY_RUN,
         0,
         "acknowledged by a stop"
     );
@@ -402,15 +389,16 @@ fn the_observer_follows_the_valve_and_the_alarms_follow_injected_faults() {
 /// observer) into the paper's pulses for a minute: no alarm on the healthy virtual bench.
 #[test]
 fn no_alarm_from_rest_through_a_minute_of_pulses() {
-    let (mut app, mut io) = setup(Mode::Stop, 0);
-    run(&mut app, &mut io, 5000);
-    assert_eq!(read_observer(&mut app).3, 0, "at rest");
+    let mut b = setup(Mode::Stop, 0);
+    run(&mut b, 5000);
+    assert_eq!(read_observer(&mut b).3, 0, "at rest");
     let mut r = Response::new();
-    app.scada_frame(&with_crc(&[1, 6, 0, 1, 0, 2]), &mut r)
+    b.scada
+        .handle(&with_crc(&[1, 6, 0, 1, 0, 2]), &mut r)
         .unwrap();
     for s in 0..60 {
-        run(&mut app, &mut io, 1000);
-        let alarms = read_observer(&mut app).3;
+        run(&mut b, 1000);
+        let alarms = read_observer(&mut b).3;
         assert_eq!(alarms, 0, "alarm {alarms:#x} at {s} s of pulses");
     }
 }

@@ -17,8 +17,8 @@
 #![no_std]
 #![no_main]
 
-use controller::app::{App, AppConfig, NarmaxModel};
-use controller::bench::{VirtualBench, VirtualBenchConfig, VirtualIo};
+use controller::bench::{VirtualBenchConfig, VirtualBoard};
+use controller::control::{Config, NarmaxModel};
 use controller::scada::Mode;
 use core::fmt::Write;
 use core::hint::black_box;
@@ -349,28 +349,33 @@ const PRESSURE_MS: u32 = (models::pressure::SAMPLE_PERIOD_S * 1000.0 + 0.5) as u
 /// Flow model period, ms.
 const FLOW_MS: u32 = (models::flow::SAMPLE_PERIOD_S * 1000.0 + 0.5) as u32;
 
-/// The controller's 1 ms tick (`App::tick`) on the virtual bench in profile mode (the paper's
-/// excitation), NARMAX in f32, as the QEMU firmware runs it. A tick's cost includes the
-/// virtual bench's I/O it calls (ADC codes, the in-process drive's answers); the bench's own
-/// 1 ms step is left out.
+/// The control task's core, [`Controller::step`](controller::control::Controller::step), on
+/// the virtual bench in profile mode (the paper's excitation), NARMAX in f32, as the QEMU
+/// firmware runs it. The inputs (ADC codes, commands, VFD status) are made outside the timed
+/// call, and the links and the bench's 1 ms step run between calls, untimed.
 fn tick(c: &mut Cost, n: u32) -> Result<(), Error> {
-    let config = AppConfig {
+    let config = Config {
         initial_mode: Mode::Profile,
         profile_seed: SEED,
         virtual_bench: true,
-        ..AppConfig::bench()
+        ..Config::bench()
     };
     let p = NarmaxModel::new(&models::pressure::F32, &models::pressure::Q15, PRESSURE_MS)
         .map_err(|_| "pressure model")?;
     let q = NarmaxModel::new(&models::flow::F32, &models::flow::Q15, FLOW_MS)
         .map_err(|_| "flow model")?;
-    let mut app = App::new(config, p, q).map_err(|_| "controller refused its configuration")?;
-    let bench = VirtualBench::new(VirtualBenchConfig::default_offsets(SEED))
-        .map_err(|_| "virtual bench")?;
-    let mut io = VirtualIo::new(bench, config.vfd).ok_or("VFD map")?;
+    let mut b = VirtualBoard::new(&config, p, q, VirtualBenchConfig::default_offsets(SEED))
+        .map_err(|_| "controller refused its configuration")?;
     for _ in 0..n {
-        c.time(|| app.tick(black_box(&mut io)));
-        io.step_1ms().map_err(|_| "virtual bench step failed")?;
+        let inputs = VirtualBoard::inputs(&b.controller, &mut b.io, &b.scada, &b.vfd);
+        let out = c.time(|| b.controller.step(black_box(&inputs)));
+        b.io.set_torque_ref(out.torque_ref_pct);
+        if let Some(x) = out.bench {
+            b.io.apply(x.valve_permille, x.faults);
+        }
+        b.io.step_1ms().map_err(|_| "virtual bench step failed")?;
+        b.scada.publish(&out.published);
+        b.vfd.poll(out.t_ms, out.requested_torque_pct, &mut b.io);
     }
     Ok(())
 }

@@ -208,8 +208,8 @@ fn num<T: std::str::FromStr>(line: &str, key: &str) -> Result<T> {
 /// bench, in-process drive), with the options the firmware announces in its header line.
 /// Returns the log lines it makes for the ticks `0..=run_ms`.
 fn host_replay(header: &str, run_ms: u32) -> Result<Vec<String>> {
-    use controller::app::{App, AppConfig, NarmaxModel};
-    use controller::bench::{VirtualBench, VirtualBenchConfig, VirtualIo};
+    use controller::bench::{VirtualBenchConfig, VirtualBoard};
+    use controller::control::{Config, NarmaxModel};
     use controller::scada::{Arithmetic, Mode};
     let seed: u64 = num(header, "seed")?;
     let mode = match num::<u8>(header, "mode")? {
@@ -219,15 +219,15 @@ fn host_replay(header: &str, run_ms: u32) -> Result<Vec<String>> {
     };
     let arithmetic = Arithmetic::from_name(field(header, "narmax")?)
         .ok_or_else(|| format!("bad 'narmax' in line: {header}"))?;
-    let config = AppConfig {
+    let config = Config {
         initial_mode: mode,
         initial_setpoint: num(header, "setpoint")?,
         profile_seed: seed,
         initial_arithmetic: arithmetic,
         virtual_bench: true,
-        ..AppConfig::bench()
+        ..Config::bench()
     };
-    let e = |e: controller::app::AppError| e.to_string();
+    let e = |e: controller::control::Error| e.to_string();
     let ms = |s: f32| (s * 1000.0 + 0.5) as u32;
     let p = NarmaxModel::new(
         &pressure_model::F32,
@@ -241,18 +241,15 @@ fn host_replay(header: &str, run_ms: u32) -> Result<Vec<String>> {
         ms(flow_model::SAMPLE_PERIOD_S),
     )
     .map_err(e)?;
-    let mut app = App::new(config, p, q).map_err(e)?;
-    let bench =
-        VirtualBench::new(VirtualBenchConfig::default_offsets(seed)).map_err(|e| e.to_string())?;
-    let mut io = VirtualIo::new(bench, config.vfd).ok_or("bad VFD map")?;
+    let mut board =
+        VirtualBoard::new(&config, p, q, VirtualBenchConfig::default_offsets(seed)).map_err(e)?;
     let mut lines = vec![];
     for _ in 0..=run_ms {
-        if let Some(log) = app.tick(&mut io) {
+        if let Some(log) = board.tick().map_err(|e| e.to_string())?.log {
             let mut text = String::new();
             log.write_text(&mut text).map_err(|e| e.to_string())?;
             lines.push(text);
         }
-        io.step_1ms().map_err(|e| e.to_string())?;
     }
     Ok(lines)
 }

@@ -1,31 +1,35 @@
-//! The controller's fixed-rate loop, board-independent: call [`App::tick`] every millisecond
-//! with the board's I/O ([`Io`]); hand SCADA frames to [`App::scada_frame`].
+//! The real-time core: [`Controller::step`] once per millisecond, a pure function of its
+//! state and [`Inputs`] (ADC codes, the SCADA's [`Commands`], the VFD link's [`VfdStatus`]),
+//! giving [`Outputs`] (the torque reference, what SCADA publishes, the log line). It does no
+//! I/O and owns no link: the SCADA server ([`crate::link::ScadaLink`]) and the VFD master
+//! ([`crate::link::VfdLink`]) run apart from it (on the MCU at a lower priority) and exchange
+//! these small `Copy` structs with it.
 //!
-//! Each tick:
+//! Each step:
 //! 1. the torque requested by the mode (holding register 1: stop → 0 %, manual → the
 //!    setpoint, profile → the paper's pulses, restarted from its seed on entry);
-//! 2. the VFD link: answers taken, timeouts and retries, the next exchange started; during
-//!    the link alarm (the reference cannot be delivered) the applied torque reference is the
-//!    safe value, 0 %; while the drive's reads fail its readings are published as 0 with the
-//!    "readings invalid" status bit (see [`crate::vfd`]);
-//! 3. the applied reference to the torque output (DAC / PWM);
-//! 4. every pressure period (50 ms) the pressure transmitter is read, every flow period
-//!    (100 ms) the flow transmitter; each NARMAX model steps with its sample: one-step-ahead on
-//!    the measurement, or free run on its own predictions while the transmitter is in fault
-//!    (NAMUR NE 43, flagged on the sample that shows it); residuals (measured − predicted) for
-//!    the white-box and NARMAX models;
-//! 5. with each pressure sample (50 ms), the observer ([`model_core::observer`], f32) steps
+//! 2. the applied reference: the requested one, or the safe value 0 % while the VFD link
+//!    alarm stands (the reference cannot be delivered, see [`crate::vfd`]); it goes to the
+//!    torque output (DAC / PWM) and, as requested, to the VFD link;
+//! 3. every pressure period (50 ms) the pressure transmitter's code, every flow period
+//!    (100 ms) the flow transmitter's ([`Controller::samples_due`] says which a board must
+//!    convert); each NARMAX model steps with its sample: one-step-ahead on the measurement, or
+//!    free run on its own predictions while the transmitter is in fault (NAMUR NE 43, flagged
+//!    on the sample that shows it); residuals (measured − predicted) for the white-box and
+//!    NARMAX models;
+//! 4. with each pressure sample (50 ms), the observer ([`model_core::observer`], f32) steps
 //!    with the mean applied torque since the last one and takes the pressure, the flow (when
 //!    it was sampled) and the VFD's speed (when a read brought a fresh one), each unless in
 //!    fault; the alarms ([`model_core::monitor`]) follow;
-//! 6. the white-box bench (f32, RK4) one 1 ms step with the applied reference;
-//! 7. once a second, a [`LogLine`].
+//! 5. the white-box bench (f32, RK4) one 1 ms step with the applied reference;
+//! 6. the published values (SCADA input registers) and, once a second, a [`LogLine`].
 //!
-//! Nothing here touches hardware, so the whole loop runs in host tests against fakes.
+//! Nothing here touches hardware, so the core runs in host tests and in the host replay of
+//! the QEMU run, bit for bit.
 
 use crate::analog::{AnalogInput, LoopConfig, Status as InputStatus};
-use crate::scada::{Arithmetic, Mode, Published, Response, ScadaSlave, Status};
-use crate::vfd::{Frame, VfdMap, VfdMaster};
+use crate::scada::{Arithmetic, Mode, Published, Status};
+use crate::vfd::{VfdMap, VfdReadings};
 use model_core::excitation::McuPulses;
 use model_core::monitor::{Monitor, MonitorConfig, MonitorInputs};
 use model_core::narmax::mcu::{NarxF32, NarxF32State, NarxQ15, NarxQ15State};
@@ -33,32 +37,14 @@ use model_core::narmax::{NarmaxError, NarmaxOutput};
 use model_core::observer::{Measurements, Observer, ObserverConfig, ObserverError};
 use model_core::{BenchError, BenchState, Scheme, Signals, WhiteBox};
 
-/// Loop period, ms: one [`App::tick`].
+/// Step period, ms: one [`Controller::step`].
 pub const TICK_MS: u32 = 1;
 /// A log line every this many ms.
 pub const LOG_EVERY_MS: u32 = 1000;
 
-/// What a board gives the loop.
-pub trait Io {
-    /// Raw ADC code of the pressure transmitter's shunt.
-    fn pressure_code(&mut self) -> u16;
-    /// Raw ADC code of the flow transmitter's shunt.
-    fn flow_code(&mut self) -> u16;
-    /// Sets the VFD's analog torque reference, % of nominal (finite, 0..=100).
-    fn set_torque_ref(&mut self, pct: f32);
-    /// Sends one RTU frame to the VFD.
-    fn vfd_send(&mut self, frame: &[u8]);
-    /// Moves a complete RTU frame received from the VFD into `frame`; `false` if none.
-    fn vfd_receive(&mut self, now_ms: u32, frame: &mut Frame) -> bool;
-    /// A virtual bench's valve (0.1 % of nominal k2) and injected faults
-    /// (`scada::FAULT_*`), from SCADA holding registers 3 and 4, every tick; a board with a
-    /// real bench has none and ignores them.
-    fn virtual_bench(&mut self, _valve_permille: u16, _faults: u16) {}
-}
-
-/// Configuration of the loop.
+/// Configuration of the controller and its links.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct AppConfig {
+pub struct Config {
     /// Pressure transmitter loop (mca at 4 and 20 mA).
     pub pressure_loop: LoopConfig,
     /// Flow transmitter loop (l/s at 4 and 20 mA).
@@ -76,11 +62,11 @@ pub struct AppConfig {
     /// NARMAX arithmetic at start-up.
     pub initial_arithmetic: Arithmetic,
     /// The board has a virtual bench: SCADA holding registers 3 (valve) and 4 (fault
-    /// injection) exist and are handed to [`Io::virtual_bench`] every tick.
+    /// injection) exist and are handed on in [`Outputs::bench`] every step.
     pub virtual_bench: bool,
 }
 
-impl AppConfig {
+impl Config {
     /// Pressure 0..10 mca and flow 0..30 l/s on [`LoopConfig::typical`] loops, the
     /// [`VfdMap::example_16384`] drive, SCADA unit 1, profile seed 1, stopped, NARMAX in f32,
     /// no virtual bench.
@@ -99,9 +85,9 @@ impl AppConfig {
     }
 }
 
-/// Why the loop could not be built.
+/// Why the controller or a link could not be built.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub enum AppError {
+pub enum Error {
     /// A configuration value is out of range; the text says which.
     Config(&'static str),
     /// The white-box bench refused its parameters.
@@ -112,13 +98,13 @@ pub enum AppError {
     Observer(ObserverError),
 }
 
-impl core::fmt::Display for AppError {
+impl core::fmt::Display for Error {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
-            AppError::Config(what) => write!(f, "bad configuration: {what}"),
-            AppError::Bench(e) => write!(f, "white-box bench: {e}"),
-            AppError::Narmax(e) => write!(f, "NARMAX model: {e}"),
-            AppError::Observer(e) => write!(f, "{e}"),
+            Error::Config(what) => write!(f, "bad configuration: {what}"),
+            Error::Bench(e) => write!(f, "white-box bench: {e}"),
+            Error::Narmax(e) => write!(f, "NARMAX model: {e}"),
+            Error::Observer(e) => write!(f, "{e}"),
         }
     }
 }
@@ -142,9 +128,9 @@ impl<const F: usize, const H: usize> NarmaxModel<F, H> {
         float: &'static NarxF32<F, H>,
         fixed: &'static NarxQ15<F, H>,
         period_ms: u32,
-    ) -> Result<Self, AppError> {
+    ) -> Result<Self, Error> {
         if period_ms == 0 {
-            return Err(AppError::Config("NARMAX period must be >= 1 ms"));
+            return Err(Error::Config("NARMAX period must be >= 1 ms"));
         }
         let (u0, y0) = (0.0, float.output_mean());
         Ok(Self {
@@ -293,9 +279,101 @@ impl LogLine {
     }
 }
 
-/// The controller.
+/// What the SCADA holding registers ask of the controller (see [`crate::scada`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Commands {
+    /// Mode.
+    pub mode: Mode,
+    /// Torque setpoint, 0.01 % (0..=10000).
+    pub setpoint: u16,
+    /// NARMAX arithmetic.
+    pub arithmetic: Arithmetic,
+    /// Virtual bench valve, 0.1 % of nominal k2 (500..=2000).
+    pub valve_permille: u16,
+    /// Virtual bench fault injection bits (`crate::scada::FAULT_*`, 0..=15).
+    pub faults: u16,
+    /// Writes of mode 0 (stop) so far (wraps): a change acknowledges the latched alarms.
+    pub stop_writes: u16,
+}
+
+/// What the VFD link last established (see [`crate::vfd::VfdMaster`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct VfdStatus {
+    /// The link alarm: the torque reference cannot be delivered; 0 % is applied.
+    pub link_alarm: bool,
+    /// The drive's readings; `None` while they are invalid (reads fail).
+    pub readings: Option<VfdReadings>,
+    /// Successful reads so far (wraps): a change means fresh readings.
+    pub reads_ok: u32,
+}
+
+impl VfdStatus {
+    /// Before the link has answered: in alarm, no readings.
+    pub const START: Self = Self {
+        link_alarm: true,
+        readings: None,
+        reads_ok: 0,
+    };
+
+    /// The torque reference applied for a requested one, %: 0 during the link alarm (and
+    /// for NaN), else the request clamped to 0..=100.
+    pub fn applied_torque_pct(&self, requested_pct: f32) -> f32 {
+        if self.link_alarm || requested_pct.is_nan() {
+            0.0
+        } else {
+            requested_pct.clamp(0.0, 100.0)
+        }
+    }
+}
+
+/// The inputs of one [`Controller::step`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Inputs {
+    /// Raw ADC code of the pressure transmitter's shunt; read only when
+    /// [`Controller::samples_due`] says so (any value otherwise).
+    pub pressure_code: u16,
+    /// Raw ADC code of the flow transmitter's shunt; as `pressure_code`.
+    pub flow_code: u16,
+    /// The SCADA's holding registers.
+    pub commands: Commands,
+    /// The VFD link's state.
+    pub vfd: VfdStatus,
+}
+
+/// A virtual bench's settings from SCADA (holding registers 3 and 4).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct BenchCommands {
+    /// Valve, 0.1 % of nominal k2 (500..=2000).
+    pub valve_permille: u16,
+    /// Injected faults (`crate::scada::FAULT_*`).
+    pub faults: u16,
+}
+
+/// The outputs of one [`Controller::step`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Outputs {
+    /// Step time, ms (wraps after 49 days).
+    pub t_ms: u32,
+    /// The applied torque reference, % (0..=100): the analog output's.
+    pub torque_ref_pct: f32,
+    /// The requested torque reference, %: what the VFD link writes (it substitutes 0 % by
+    /// itself while in alarm).
+    pub requested_torque_pct: f32,
+    /// The virtual bench's settings; `None` on a board without one.
+    pub bench: Option<BenchCommands>,
+    /// What the SCADA input registers publish.
+    pub published: Published,
+    /// Once a second, the log line.
+    pub log: Option<LogLine>,
+}
+
+/// The controller: models, observer, alarms and the 4-20 mA inputs, stepped every 1 ms.
 #[derive(Debug, Clone)]
-pub struct App<const NP: usize, const HP: usize, const NF: usize, const HF: usize> {
+pub struct Controller<const NP: usize, const HP: usize, const NF: usize, const HF: usize> {
     whitebox: WhiteBox<f32>,
     wb: BenchState<f32>,
     pressure: NarmaxModel<NP, HP>,
@@ -303,8 +381,6 @@ pub struct App<const NP: usize, const HP: usize, const NF: usize, const HF: usiz
     arithmetic: Arithmetic,
     pressure_in: AnalogInput,
     flow_in: AnalogInput,
-    vfd: VfdMaster,
-    scada: ScadaSlave,
     profile_seed: u64,
     profile: Option<McuPulses>,
     t_ms: u32,
@@ -316,41 +392,30 @@ pub struct App<const NP: usize, const HP: usize, const NF: usize, const HF: usiz
     /// Applied torque summed since the last observer step, % · ticks, and the ticks.
     torque_sum: f32,
     torque_ticks: u32,
-    /// [`VfdMaster::reads_ok`] at the last observer step.
+    /// [`VfdStatus::reads_ok`] at the last observer step.
     vfd_reads_seen: u32,
-    /// [`ScadaSlave::stop_writes`] last acknowledged.
+    /// [`Commands::stop_writes`] last acknowledged.
     stop_writes_seen: u16,
     virtual_bench: bool,
     out: Published,
-    tx: Frame,
-    rx: Frame,
 }
 
-impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize> App<NP, HP, NF, HF> {
-    /// The loop with the paper's white-box bench and the two NARMAX models, at rest.
+impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
+    Controller<NP, HP, NF, HF>
+{
+    /// The controller with the paper's white-box bench and the two NARMAX models, at rest.
     pub fn new(
-        config: AppConfig,
+        config: &Config,
         pressure: NarmaxModel<NP, HP>,
         flow: NarmaxModel<NF, HF>,
-    ) -> Result<Self, AppError> {
+    ) -> Result<Self, Error> {
         let pressure_in =
-            AnalogInput::new(config.pressure_loop).ok_or(AppError::Config("pressure loop"))?;
-        let flow_in = AnalogInput::new(config.flow_loop).ok_or(AppError::Config("flow loop"))?;
-        let vfd = VfdMaster::new(config.vfd).ok_or(AppError::Config("VFD map"))?;
-        let mut scada = ScadaSlave::new(config.scada_unit).ok_or(AppError::Config("SCADA unit"))?;
-        if config.initial_setpoint > crate::scada::SETPOINT_MAX {
-            return Err(AppError::Config("initial setpoint above 10000"));
-        }
-        scada.mode = config.initial_mode;
-        scada.setpoint = config.initial_setpoint;
-        scada.arithmetic = config.initial_arithmetic;
-        if config.virtual_bench {
-            scada = scada.with_virtual_bench();
-        }
-        let observer = Observer::new(ObserverConfig::paper(), 0.0).map_err(AppError::Observer)?;
+            AnalogInput::new(config.pressure_loop).ok_or(Error::Config("pressure loop"))?;
+        let flow_in = AnalogInput::new(config.flow_loop).ok_or(Error::Config("flow loop"))?;
+        let observer = Observer::new(ObserverConfig::paper(), 0.0).map_err(Error::Observer)?;
         let whitebox = WhiteBox::<f32>::paper();
-        let wb = whitebox.steady_state(0.0).map_err(AppError::Bench)?;
-        let mut app = Self {
+        let wb = whitebox.steady_state(0.0).map_err(Error::Bench)?;
+        let mut c = Self {
             whitebox,
             wb,
             pressure,
@@ -358,8 +423,6 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize> App<NP,
             arithmetic: Arithmetic::F32,
             pressure_in,
             flow_in,
-            vfd,
-            scada,
             profile_seed: config.profile_seed,
             profile: None,
             t_ms: 0,
@@ -374,18 +437,25 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize> App<NP,
             stop_writes_seen: 0,
             virtual_bench: config.virtual_bench,
             out: Published::default(),
-            tx: Frame::new(),
-            rx: Frame::new(),
         };
-        let s = app.whitebox.signals(&app.wb);
-        app.pressure.reseed(Arithmetic::F32, 0.0, s.pressure_mca);
-        app.flow.reseed(Arithmetic::F32, 0.0, s.flow_lps);
-        Ok(app)
+        let s = c.whitebox.signals(&c.wb);
+        c.pressure.reseed(Arithmetic::F32, 0.0, s.pressure_mca);
+        c.flow.reseed(Arithmetic::F32, 0.0, s.flow_lps);
+        Ok(c)
     }
 
-    /// Loop time, ms (ticks since start).
+    /// Time of the next step, ms (steps since start).
     pub fn now_ms(&self) -> u32 {
         self.t_ms
+    }
+
+    /// Which transmitters the next step samples: (pressure, flow). A board converts only
+    /// those (a virtual bench draws its noise only for those).
+    pub fn samples_due(&self) -> (bool, bool) {
+        (
+            self.t_ms.is_multiple_of(self.pressure.period_ms),
+            self.t_ms.is_multiple_of(self.flow.period_ms),
+        )
     }
 
     /// What the SCADA registers hold now.
@@ -393,36 +463,30 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize> App<NP,
         &self.out
     }
 
-    /// The SCADA slave's holding registers (setpoint, mode, arithmetic).
-    pub fn scada(&self) -> &ScadaSlave {
-        &self.scada
-    }
-
-    /// The VFD master (link state, readings).
-    pub fn vfd(&self) -> &VfdMaster {
-        &self.vfd
-    }
-
     /// The white-box model's signals now.
     pub fn whitebox_signals(&self) -> Signals<f32> {
         self.whitebox.signals(&self.wb)
     }
 
-    /// Handles one SCADA RTU frame; the answer (if any) is in `response`.
-    pub fn scada_frame(&mut self, frame: &[u8], response: &mut Response) -> Option<usize> {
-        let registers = self.out.registers();
-        self.scada.handle(frame, &registers, response)
+    /// The observer (its state, covariance and last estimate).
+    pub fn observer(&self) -> &Observer<f32> {
+        &self.observer
     }
 
-    fn requested_torque_pct(&mut self) -> f32 {
-        match self.scada.mode {
+    /// The alarms.
+    pub fn monitor(&self) -> &Monitor<f32> {
+        &self.monitor
+    }
+
+    fn requested_torque_pct(&mut self, c: &Commands) -> f32 {
+        match c.mode {
             Mode::Stop => {
                 self.profile = None;
                 0.0
             }
             Mode::Manual => {
                 self.profile = None;
-                f32::from(self.scada.setpoint) / 100.0
+                f32::from(c.setpoint) / 100.0
             }
             Mode::Profile => {
                 let seed = self.profile_seed;
@@ -435,7 +499,7 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize> App<NP,
     }
 
     /// One observer step over the pressure period, then the alarms.
-    fn observe(&mut self, pressure: Option<f32>, flow: Option<f32>) {
+    fn observe(&mut self, pressure: Option<f32>, flow: Option<f32>, inp: &Inputs) {
         let dt = self.pressure.period_ms as f32 * 1e-3;
         let torque = if self.torque_ticks > 0 {
             self.torque_sum / self.torque_ticks as f32
@@ -443,9 +507,9 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize> App<NP,
             0.0
         };
         (self.torque_sum, self.torque_ticks) = (0.0, 0);
-        let fresh = self.vfd.reads_ok() != self.vfd_reads_seen;
-        self.vfd_reads_seen = self.vfd.reads_ok();
-        let drive = self.vfd.readings().filter(|_| fresh);
+        let fresh = inp.vfd.reads_ok != self.vfd_reads_seen;
+        self.vfd_reads_seen = inp.vfd.reads_ok;
+        let drive = inp.vfd.readings.filter(|_| fresh);
         let m = Measurements {
             pressure_mca: pressure,
             flow_lps: flow,
@@ -466,11 +530,11 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize> App<NP,
             measured_flow_lps: flow,
             pressure_fault: self.pressure_in.faulted(),
             flow_fault: self.flow_in.faulted(),
-            vfd_link_alarm: self.vfd.alarm(),
+            vfd_link_alarm: inp.vfd.link_alarm,
         });
-        if self.scada.stop_writes != self.stop_writes_seen {
+        if inp.commands.stop_writes != self.stop_writes_seen {
             // SCADA wrote "stop": the operator's reset of latched alarms whose cause is gone.
-            self.stop_writes_seen = self.scada.stop_writes;
+            self.stop_writes_seen = inp.commands.stop_writes;
             self.monitor.acknowledge();
         }
         let alarms = self.monitor.bits();
@@ -482,48 +546,23 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize> App<NP,
         o.alarms = alarms;
     }
 
-    /// The observer (its state, covariance and last estimate).
-    pub fn observer(&self) -> &Observer<f32> {
-        &self.observer
-    }
-
-    /// The alarms.
-    pub fn monitor(&self) -> &Monitor<f32> {
-        &self.monitor
-    }
-
-    /// One millisecond of the loop (see the module docs); a log line once a second.
-    pub fn tick(&mut self, io: &mut impl Io) -> Option<LogLine> {
+    /// One millisecond (see the module docs).
+    pub fn step(&mut self, inp: &Inputs) -> Outputs {
         let now = self.t_ms;
-        let requested = self.requested_torque_pct();
-
-        while io.vfd_receive(now, &mut self.rx) {
-            self.vfd.receive(&self.rx);
-        }
-        if self.vfd.poll(now, &mut self.tx).is_some() {
-            io.vfd_send(&self.tx);
-        }
-        if self.vfd.start(now, requested, &mut self.tx).is_some() {
-            io.vfd_send(&self.tx);
-        }
-        let u = self.vfd.applied_torque_pct(requested);
-        io.set_torque_ref(u);
-        if self.virtual_bench {
-            io.virtual_bench(self.scada.valve_permille, self.scada.faults);
-        }
+        let (take_p, take_q) = self.samples_due();
+        let requested = self.requested_torque_pct(&inp.commands);
+        let u = inp.vfd.applied_torque_pct(requested);
         self.torque_sum += u;
         self.torque_ticks += 1;
 
-        if self.scada.arithmetic != self.arithmetic {
+        if inp.commands.arithmetic != self.arithmetic {
             // The other arithmetic's history is stale: start it at the last predictions.
-            self.arithmetic = self.scada.arithmetic;
+            self.arithmetic = inp.commands.arithmetic;
             let (p, q) = (self.pressure.last, self.flow.last);
             self.pressure.reseed(self.arithmetic, u, p);
             self.flow.reseed(self.arithmetic, u, q);
         }
 
-        let take_p = now.is_multiple_of(self.pressure.period_ms);
-        let take_q = now.is_multiple_of(self.flow.period_ms);
         if take_p || take_q {
             let wb = self.whitebox.signals(&self.wb);
             self.wb_extrapolating = wb.extrapolation.any();
@@ -533,7 +572,7 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize> App<NP,
             o.whitebox_flow_lps = wb.flow_lps;
             let mut pressure_measured = None;
             if take_p {
-                let r = self.pressure_in.sample(io.pressure_code());
+                let r = self.pressure_in.sample(inp.pressure_code);
                 let good = r.status != InputStatus::Fault;
                 // The observer takes only readings inside the span (4..20 mA): outside it the
                 // value is clamped, a bound rather than a measurement (at rest the outlet
@@ -557,7 +596,7 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize> App<NP,
             }
             let mut flow_measured = None;
             if take_q {
-                let r = self.flow_in.sample(io.flow_code());
+                let r = self.flow_in.sample(inp.flow_code);
                 let good = r.status != InputStatus::Fault;
                 flow_measured = (r.status == InputStatus::Ok).then_some(r.value);
                 let nx = self.flow.step(self.arithmetic, u, good.then_some(r.value));
@@ -571,7 +610,7 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize> App<NP,
                 };
             }
             if take_p {
-                self.observe(pressure_measured, flow_measured);
+                self.observe(pressure_measured, flow_measured, inp);
             }
         }
 
@@ -582,15 +621,14 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize> App<NP,
             .step(&mut self.wb, u, TICK_MS as f32 * 1e-3, Scheme::Rk4)
             .is_err();
 
-        let link_ok = !self.vfd.alarm();
+        let link_ok = !inp.vfd.link_alarm;
         let (p_fault, q_fault) = (self.pressure_in.faulted(), self.flow_in.faulted());
         // Stale readings are never published: invalid readings read 0, with status bit 6.
-        let readings = self.vfd.readings();
-        let blind = readings.is_none();
-        let readings = readings.unwrap_or_default();
+        let blind = inp.vfd.readings.is_none();
+        let readings = inp.vfd.readings.unwrap_or_default();
         let o = &mut self.out;
         o.status = Status {
-            running: self.scada.mode != Mode::Stop,
+            running: inp.commands.mode != Mode::Stop,
             any_alarm: !link_ok
                 || blind
                 || p_fault
@@ -610,11 +648,21 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize> App<NP,
         o.uptime_s = (now / 1000) as u16;
 
         self.t_ms = now.wrapping_add(TICK_MS);
-        now.is_multiple_of(LOG_EVERY_MS).then_some(LogLine {
+        Outputs {
             t_ms: now,
-            mode: self.scada.mode,
-            arithmetic: self.arithmetic,
-            values: self.out,
-        })
+            torque_ref_pct: u,
+            requested_torque_pct: requested,
+            bench: self.virtual_bench.then_some(BenchCommands {
+                valve_permille: inp.commands.valve_permille,
+                faults: inp.commands.faults,
+            }),
+            published: self.out,
+            log: now.is_multiple_of(LOG_EVERY_MS).then_some(LogLine {
+                t_ms: now,
+                mode: inp.commands.mode,
+                arithmetic: self.arithmetic,
+                values: self.out,
+            }),
+        }
     }
 }
