@@ -2,8 +2,10 @@
 //! hardware and the models, written as plain `no_std` code and tested on the host.
 //!
 //! - [`analog`]: the 4-20 mA inputs with NAMUR NE 43 faults;
-//! - [`scada`]: the SCADA Modbus RTU slave and its register map;
-//! - [`vfd`]: the VFD Modbus RTU master; [`vfdsim`]: a simulated drive (its slave side);
+//! - [`modbus`]: the Modbus RTU layer: frames, CRC, the RTU gate, content framing and the one
+//!   slave engine that serves a register map;
+//! - [`scada`]: the SCADA slave's register map;
+//! - [`vfd`]: the VFD Modbus RTU master; [`vfdsim`]: a simulated drive (its register map);
 //! - [`rtu`]: RTU framing by silence;
 //! - [`app`]: the 1 ms loop that ties them to the white-box and NARMAX models;
 //! - [`mod@bench`]: the virtual bench that stands in for the real one (QEMU, host tests).
@@ -14,6 +16,7 @@
 pub mod analog;
 pub mod app;
 pub mod bench;
+pub mod modbus;
 pub mod rtu;
 pub mod scada;
 pub mod vfd;

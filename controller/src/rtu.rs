@@ -5,13 +5,13 @@
 //! milliseconds, so a board sets `idle_ms` to the next millisecond above that, plus one for the
 //! tick's resolution. QEMU marks no silence on its serial ports (bytes arrive as the guest reads
 //! them), so the virtual bench uses a longer gap (see the firmware). A frame longer than
-//! [`MAX_FRAME`](crate::scada::MAX_FRAME) bytes is dropped whole: its end is still waited for, and no part of it is
+//! [`MAX_FRAME`](crate::modbus::MAX_FRAME) bytes is dropped whole: its end is still waited for, and no part of it is
 //! handed on.
 
-pub use crate::vfd::Frame;
+use crate::modbus::Frame;
 
 /// Bytes an [`RtuFramer`] holds: the longest frame.
-const HOLD: usize = crate::scada::MAX_FRAME;
+const HOLD: usize = crate::modbus::MAX_FRAME;
 
 /// Collects bytes into frames.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -58,7 +58,7 @@ impl RtuFramer {
         self.len = 0;
     }
 
-    /// Takes one received byte at time `now_ms`. Past [`MAX_FRAME`](crate::scada::MAX_FRAME)
+    /// Takes one received byte at time `now_ms`. Past [`MAX_FRAME`](crate::modbus::MAX_FRAME)
     /// bytes the frame is too long (it will be dropped at the silence); the last bytes are
     /// kept, so that [`Self::take_if`] can still find a whole frame at their end.
     pub fn push(&mut self, byte: u8, now_ms: u32) {
@@ -80,7 +80,7 @@ impl RtuFramer {
     }
 
     /// A whole frame at the end of the bytes held, found by its content: `find` gives where
-    /// it starts (e.g. [`crate::scada::request_at_end`]: a request whose length its function
+    /// it starts (e.g. [`crate::modbus::request_at_end`]: a request whose length its function
     /// fixes, with a valid CRC). It is moved into `out` and whatever came before it (noise) is
     /// dropped, without waiting for the silence. `false` otherwise (bytes kept).
     pub fn take_if(&mut self, out: &mut Frame, find: impl Fn(&[u8]) -> Option<usize>) -> bool {
@@ -211,7 +211,7 @@ impl<U: Uart> RtuPort<U> {
 
     /// As [`Self::receive`], and also a frame that `find` sees whole at the end of the bytes
     /// before the silence (see [`RtuFramer::take_if`]; the SCADA slave uses
-    /// [`crate::scada::request_at_end`]). On a line that marks no silence (QEMU), this is
+    /// [`crate::modbus::request_at_end`]). On a line that marks no silence (QEMU), this is
     /// what lets back-to-back requests, and a request right after noise, be answered. Bytes
     /// are checked one at a time, so a whole request is found as its last byte arrives.
     pub fn receive_complete(

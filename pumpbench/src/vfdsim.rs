@@ -5,7 +5,8 @@
 
 use crate::Failure;
 use controller::bench::{VirtualBench, VirtualBenchConfig};
-use controller::rtu::{Frame, RtuFramer};
+use controller::modbus::Frame;
+use controller::rtu::RtuFramer;
 use controller::vfd::VfdMap;
 use controller::vfdsim::{DriveValues, VfdSim};
 use nix::sys::termios::{self, SetArg};

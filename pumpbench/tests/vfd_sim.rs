@@ -3,7 +3,8 @@
 //! the speed read back is the bench's, and when the simulator goes away the master raises the
 //! link alarm and forces 0 % torque.
 
-use controller::rtu::{Frame, RtuFramer};
+use controller::modbus::Frame;
+use controller::rtu::RtuFramer;
 use controller::vfd::{VfdMap, VfdMaster};
 use nix::fcntl::{fcntl, FcntlArg, OFlag};
 use nix::pty::openpty;
