@@ -6,7 +6,7 @@
 //!   slave engine that serves a register map;
 //! - [`scada`]: the SCADA slave's register map;
 //! - [`vfd`]: the VFD Modbus RTU master; [`vfdsim`]: a simulated drive (its register map);
-//! - [`rtu`]: RTU framing by silence;
+//! - [`rtu`]: RTU framing by silence and an RS-485 port on the embedded-hal traits;
 //! - [`app`]: the 1 ms loop that ties them to the white-box and NARMAX models;
 //! - [`mod@bench`]: the virtual bench that stands in for the real one (QEMU, host tests).
 #![cfg_attr(not(test), no_std)]
