@@ -15,7 +15,8 @@
 use crate::analog::{LoopConfig, VALID_HIGH_MA, VALID_LOW_MA};
 use crate::control::{Config, Controller, Error, Inputs, NarmaxModel, Outputs};
 use crate::link::{ScadaLink, VfdLink, VfdPort};
-use crate::vfd::{Frame, VfdMap};
+use crate::modbus::Frame;
+use crate::vfd::VfdMap;
 use crate::vfdsim::{DriveValues, VfdSim};
 use model_core::excitation::SplitMix64;
 use model_core::{BenchError, BenchParams, BenchState, Scheme, Signals, WhiteBox};

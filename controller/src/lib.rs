@@ -2,9 +2,11 @@
 //! hardware and the models, written as plain `no_std` code and tested on the host.
 //!
 //! - [`analog`]: the 4-20 mA inputs with NAMUR NE 43 faults;
-//! - [`scada`]: the SCADA Modbus RTU slave and its register map;
-//! - [`vfd`]: the VFD Modbus RTU master; [`vfdsim`]: a simulated drive (its slave side);
-//! - [`rtu`]: RTU framing and the RS-485 port;
+//! - [`modbus`]: the Modbus RTU layer: frames, CRC, the RTU gate, content framing and the one
+//!   slave engine that serves a register map;
+//! - [`scada`]: the SCADA slave's register map;
+//! - [`vfd`]: the VFD Modbus RTU master; [`vfdsim`]: a simulated drive (its register map);
+//! - [`rtu`]: RTU framing by silence and an RS-485 port on the embedded-hal traits;
 //! - [`control`]: the real-time core, stepped every 1 ms, that ties the inputs to the
 //!   white-box and NARMAX models, the observer and the alarms;
 //! - [`link`]: the SCADA server and the VFD master that run apart from the core;
@@ -17,6 +19,7 @@ pub mod analog;
 pub mod bench;
 pub mod control;
 pub mod link;
+pub mod modbus;
 pub mod rtu;
 pub mod scada;
 pub mod vfd;

@@ -11,8 +11,9 @@
 //! requests or a slow drive delays neither the core nor the other link's bytes.
 
 use crate::control::{Commands, Config, Error, VfdStatus};
-use crate::scada::{Published, Response, ScadaSlave, INPUT_REGISTERS};
-use crate::vfd::{Frame, VfdMap, VfdMaster};
+use crate::modbus::Frame;
+use crate::scada::{Published, ScadaSlave, INPUT_REGISTERS};
+use crate::vfd::{VfdMap, VfdMaster};
 
 /// The SCADA server's state: holding registers in, input registers out.
 #[derive(Debug, Clone)]
@@ -65,7 +66,7 @@ impl ScadaLink {
     }
 
     /// Answers one RTU request frame; the response (if any) is in `response`.
-    pub fn handle(&mut self, frame: &[u8], response: &mut Response) -> Option<usize> {
+    pub fn handle(&mut self, frame: &[u8], response: &mut Frame) -> Option<usize> {
         self.slave.handle(frame, &self.inputs, response)
     }
 }

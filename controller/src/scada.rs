@@ -44,13 +44,10 @@
 //! A write with any bad value changes nothing. Frames with a bad CRC, for another unit
 //! (broadcasts included), too short or too long get no answer and leave no state behind.
 //!
-//! `rmodbus` is the codec (parsing, responses, CRC); this module checks the RTU frame's exact
-//! length and CRC first, because rmodbus answers an unknown function without checking the CRC
-//! and ignores bytes after a valid frame, and it drops function codes 128..=255 (the exception
-//! space), on which rmodbus 0.13 overflows.
+//! The register map is served by the crate's one Modbus slave engine ([`crate::modbus::serve`]),
+//! which gives the silences and the exceptions above (and works around rmodbus's defects).
 
-use rmodbus::server::{ModbusFrame, Read, Write};
-use rmodbus::{ErrorKind, ModbusProto};
+use crate::modbus::{serve, signed_register, unsigned_register, Exception, Frame, RegisterMap};
 
 /// Input registers.
 pub const INPUT_REGISTERS: usize = 23;
@@ -72,10 +69,6 @@ pub const FAULT_FLOW_2MA: u16 = 1 << 2;
 pub const FAULT_VFD_LINK: u16 = 1 << 3;
 /// Largest torque setpoint, 0.01 %.
 pub const SETPOINT_MAX: u16 = 10_000;
-/// Longest RTU frame (Modbus: 256 bytes).
-pub const MAX_FRAME: usize = 256;
-/// A response buffer.
-pub type Response = heapless::Vec<u8, MAX_FRAME>;
 
 /// Operating mode (holding register 1).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -227,28 +220,6 @@ pub struct Published {
     pub observer_flow_sd_lps: f32,
 }
 
-/// `x · scale` rounded and clamped to 0..=u16::MAX; NaN gives 0.
-pub fn unsigned_register(x: f32, scale: f32) -> u16 {
-    let v = x * scale;
-    if v.is_nan() {
-        0
-    } else {
-        (v + 0.5).clamp(0.0, f32::from(u16::MAX)) as u16
-    }
-}
-
-/// `x · scale` rounded and clamped to i16, as the register's two's-complement bits; NaN
-/// gives 0.
-pub fn signed_register(x: f32, scale: f32) -> u16 {
-    let v = x * scale;
-    if v.is_nan() {
-        0
-    } else {
-        let r = if v < 0.0 { v - 0.5 } else { v + 0.5 };
-        r.clamp(f32::from(i16::MIN), f32::from(i16::MAX)) as i16 as u16
-    }
-}
-
 impl Published {
     /// The input registers.
     pub fn registers(&self) -> [u16; INPUT_REGISTERS] {
@@ -278,71 +249,6 @@ impl Published {
             unsigned_register(self.observer_flow_sd_lps, 100.0),
         ]
     }
-}
-
-/// CRC-16/MODBUS of `data`.
-pub fn crc16(data: &[u8]) -> u16 {
-    let mut crc = 0xFFFFu16;
-    for &b in data {
-        crc ^= u16::from(b);
-        for _ in 0..8 {
-            crc = if crc & 1 != 0 {
-                (crc >> 1) ^ 0xA001
-            } else {
-                crc >> 1
-            };
-        }
-    }
-    crc
-}
-
-/// The exact RTU length of a request (unit, function, body, CRC), or `None` when the frame
-/// does not say (too short to tell). Unknown functions have no fixed length: any CRC-valid
-/// frame of ≥ 4 bytes is taken as one.
-fn expected_len(frame: &[u8]) -> Option<usize> {
-    match *frame.get(1)? {
-        1..=6 => Some(8),
-        15 | 16 => frame.get(6).map(|&n| 9 + usize::from(n)),
-        _ => Some(frame.len()),
-    }
-}
-
-/// `true` if `frame` is a whole request by its content alone: a function whose request length
-/// is fixed by its fields (01..06, 15, 16), exactly that long, with a valid CRC; for any unit,
-/// so that traffic to other slaves on the bus is framed too. A frame of another function, or
-/// one that is not yet (or no longer) whole, gives `false`: it is ended by the silence.
-pub fn request_complete(frame: &[u8]) -> bool {
-    let n = frame.len();
-    n >= 8
-        && matches!(frame[1], 1..=6 | 15 | 16)
-        && expected_len(frame) == Some(n)
-        && crc16(&frame[..n - 2]) == u16::from_le_bytes([frame[n - 2], frame[n - 1]])
-}
-
-/// Where a whole request ([`request_complete`]) ends `bytes`, if one does: its start. On a
-/// line that marks no silence (QEMU's serial ports), a valid request that follows noise with
-/// no gap is still found this way. The odds that noise passes for a request are those of a
-/// valid CRC with a known function and length: about 2⁻²¹ per byte. While the bytes from
-/// the start may still become a whole request (a known function whose length is not reached
-/// yet), nothing inside them is taken for one, so a long write is never cut short by a
-/// request-like run of bytes in its data.
-pub fn request_at_end(bytes: &[u8]) -> Option<usize> {
-    let n = bytes.len();
-    let growing = matches!(bytes.get(1), Some(1..=6 | 15 | 16))
-        && expected_len(bytes).is_none_or(|want| want > n);
-    if growing {
-        return None;
-    }
-    if request_complete(bytes) {
-        return Some(0);
-    }
-    // Fixed-length requests (01..06) are 8 bytes; 15 and 16 carry their byte count at 6.
-    if n >= 8 && request_complete(&bytes[n - 8..]) {
-        return Some(n - 8);
-    }
-    (0..n.saturating_sub(10))
-        .rev()
-        .find(|&start| matches!(bytes[start + 1], 15 | 16) && request_complete(&bytes[start..]))
 }
 
 /// The slave: its unit address and holding registers; the input registers are handed in.
@@ -405,96 +311,39 @@ impl ScadaSlave {
         }
     }
 
-    /// Handles one received RTU frame (the bytes between two silences). Returns the response
-    /// to send, or `None` for silence.
+    /// Handles one received RTU frame (the bytes between two silences), `inputs` being the
+    /// input registers (FC 04). Returns the length of the response written to `response`, or
+    /// `None` for silence (see the module docs).
     pub fn handle(
         &mut self,
         frame: &[u8],
         inputs: &[u16; INPUT_REGISTERS],
-        response: &mut Response,
+        response: &mut Frame,
     ) -> Option<usize> {
-        response.clear();
-        // Function codes 128..=255 are the exception space, never a request; rmodbus 0.13 would
-        // overflow on them (`responding_to_fn + 0x80`, found by tests/frames.rs).
-        if frame.len() < 4 || frame.len() > MAX_FRAME || frame[0] != self.unit || frame[1] >= 0x80 {
-            return None;
-        }
-        if expected_len(frame)? != frame.len() {
-            return None;
-        }
-        let n = frame.len();
-        if crc16(&frame[..n - 2]) != u16::from_le_bytes([frame[n - 2], frame[n - 1]]) {
-            return None;
-        }
-        let func = frame[1];
-        if !matches!(func, 3 | 4 | 6 | 16) {
-            // Illegal function, whatever the fields: rmodbus would check a coil function's
-            // quantity first and answer 03.
-            let body = [self.unit, func | 0x80, 1];
-            response.extend_from_slice(&body).ok()?;
-            response
-                .extend_from_slice(&crc16(&body).to_le_bytes())
-                .ok()?;
-            return Some(response.len());
-        }
-        let mut mf = ModbusFrame::new(self.unit, frame, ModbusProto::Rtu, response)
-            .with_broadcast_units(&[]);
-        mf.parse().ok()?;
-        if !mf.response_required {
-            return None;
-        }
-        if mf.processing_required {
-            let result = match func {
-                3 | 4 if mf.count == 0 => Err(ErrorKind::IllegalDataValue),
-                16 if mf.count == 0 || usize::from(frame[6]) != 2 * usize::from(mf.count) => {
-                    Err(ErrorKind::IllegalDataValue)
-                }
-                3 | 4 => {
-                    let holding = self.holding();
-                    let table: &[u16] = if func == 4 {
-                        inputs
-                    } else {
-                        &holding[..self.holding_count()]
-                    };
-                    match mf.get_external_read() {
-                        Ok(Read::Words(r)) => read_words(table, r.address, r.count, r.buf),
-                        Ok(Read::Bits(_)) | Err(_) => Err(ErrorKind::IllegalFunction),
-                    }
-                }
-                6 | 16 => match mf.get_external_write() {
-                    Ok(Write::Words(w)) => self.write_words(w.address, w.count, w.data),
-                    Ok(Write::Bits(_)) | Err(_) => Err(ErrorKind::IllegalFunction),
-                },
-                _ => Err(ErrorKind::IllegalFunction),
-            };
-            let done = if func == 3 || func == 4 {
-                if result.is_err() {
-                    // Drop the partial read response: only the exception goes out.
-                    mf.response.clear();
-                }
-                mf.process_external_read(result)
-            } else {
-                mf.process_external_write(result)
-            };
-            done.ok()?;
-        }
-        mf.finalize_response().ok()?;
-        Some(response.len())
+        let unit = self.unit;
+        serve(
+            unit,
+            &mut ScadaMap {
+                slave: self,
+                inputs,
+            },
+            frame,
+            response,
+        )
     }
 
-    /// Applies a write of `count` registers at `address` (big-endian `data`), all or nothing.
-    fn write_words(&mut self, address: u16, count: u16, data: &[u8]) -> Result<(), ErrorKind> {
-        let end = usize::from(address) + usize::from(count);
-        if end > self.holding_count() {
-            return Err(ErrorKind::IllegalDataAddress);
+    /// Applies a write of `values` from `address` on, all or nothing.
+    fn write_words(&mut self, address: u16, values: &[u16]) -> Result<(), Exception> {
+        let start = usize::from(address);
+        if start + values.len() > self.holding_count() {
+            return Err(Exception::IllegalDataAddress);
         }
         let mut next = *self;
-        for (k, word) in data.chunks_exact(2).take(usize::from(count)).enumerate() {
-            let v = u16::from_be_bytes([word[0], word[1]]);
-            match usize::from(address) + k {
+        for (k, &v) in values.iter().enumerate() {
+            match start + k {
                 0 if v <= SETPOINT_MAX => next.setpoint = v,
                 1 => {
-                    next.mode = Mode::from_register(v).ok_or(ErrorKind::IllegalDataValue)?;
+                    next.mode = Mode::from_register(v).ok_or(Exception::IllegalDataValue)?;
                     if next.mode == Mode::Stop {
                         next.stop_writes = next.stop_writes.wrapping_add(1);
                     }
@@ -503,12 +352,12 @@ impl ScadaSlave {
                     next.arithmetic = match v {
                         0 => Arithmetic::F32,
                         1 => Arithmetic::Fixed,
-                        _ => return Err(ErrorKind::IllegalDataValue),
+                        _ => return Err(Exception::IllegalDataValue),
                     }
                 }
                 3 if VALVE_RANGE_PERMILLE.contains(&v) => next.valve_permille = v,
                 4 if v <= 15 => next.faults = v,
-                _ => return Err(ErrorKind::IllegalDataValue),
+                _ => return Err(Exception::IllegalDataValue),
             }
         }
         *self = next;
@@ -516,19 +365,41 @@ impl ScadaSlave {
     }
 }
 
-fn read_words(table: &[u16], address: u16, count: u16, buf: &mut [u8]) -> Result<(), ErrorKind> {
-    let start = usize::from(address);
-    let end = start + usize::from(count);
-    let words = table.get(start..end).ok_or(ErrorKind::IllegalDataAddress)?;
-    for (out, w) in buf.chunks_exact_mut(2).zip(words) {
-        out.copy_from_slice(&w.to_be_bytes());
+/// The SCADA register map for one request: the slave's holding registers and the inputs.
+struct ScadaMap<'a> {
+    slave: &'a mut ScadaSlave,
+    inputs: &'a [u16; INPUT_REGISTERS],
+}
+
+impl RegisterMap for ScadaMap<'_> {
+    fn read_input_registers(&self, address: u16, out: &mut [u16]) -> Result<(), Exception> {
+        read_words(self.inputs, address, out)
     }
+
+    fn read_holding_registers(&self, address: u16, out: &mut [u16]) -> Result<(), Exception> {
+        let holding = self.slave.holding();
+        read_words(&holding[..self.slave.holding_count()], address, out)
+    }
+
+    fn write_holding_registers(&mut self, address: u16, values: &[u16]) -> Result<(), Exception> {
+        self.slave.write_words(address, values)
+    }
+}
+
+/// `out` from `table` at `address`; 02 if the range leaves the table.
+fn read_words(table: &[u16], address: u16, out: &mut [u16]) -> Result<(), Exception> {
+    let start = usize::from(address);
+    let words = table
+        .get(start..start + out.len())
+        .ok_or(Exception::IllegalDataAddress)?;
+    out.copy_from_slice(words);
     Ok(())
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::modbus::crc16;
 
     fn frame(body: &[u8]) -> Vec<u8> {
         let mut f = body.to_vec();
@@ -538,7 +409,7 @@ mod tests {
 
     fn ask(s: &mut ScadaSlave, f: &[u8]) -> Option<Vec<u8>> {
         let inputs: [u16; INPUT_REGISTERS] = core::array::from_fn(|i| 100 + i as u16);
-        let mut r = Response::new();
+        let mut r = Frame::new();
         s.handle(f, &inputs, &mut r).map(|n| r[..n].to_vec())
     }
 
@@ -548,12 +419,6 @@ mod tests {
         assert_eq!(r[1], body[1] | 0x80);
         assert_eq!(crc16(&r[..3]).to_le_bytes(), [r[3], r[4]]);
         r[2]
-    }
-
-    #[test]
-    fn crc_matches_the_spec_example() {
-        // Read holding registers 0x006B..0x006D of unit 0x11: CRC 0x8776 (bytes 76 87).
-        assert_eq!(crc16(&[0x11, 0x03, 0x00, 0x6B, 0x00, 0x03]), 0x8776);
     }
 
     #[test]
@@ -698,69 +563,6 @@ mod tests {
         }
         assert_eq!(ask(&mut s, &good).unwrap(), good);
         assert_eq!(s.setpoint, 7);
-    }
-
-    #[test]
-    fn requests_whole_by_their_length_and_crc() {
-        let read = frame(&[1, 4, 0, 0, 0, 18]);
-        assert!(request_complete(&read));
-        assert!(request_complete(&frame(&[7, 3, 0, 0, 0, 1])), "any unit");
-        let fc16 = frame(&[1, 16, 0, 0, 0, 2, 4, 0x13, 0x88, 0, 1]);
-        assert!(request_complete(&fc16));
-        for n in 0..fc16.len() {
-            assert!(!request_complete(&fc16[..n]), "prefix of {n} bytes");
-        }
-        let mut bad = read.clone();
-        bad[7] ^= 1;
-        assert!(!request_complete(&bad), "bad CRC waits for the silence");
-        assert!(
-            !request_complete(&frame(&[1, 0x2B, 0x0E, 1, 0, 0])),
-            "open length"
-        );
-        let mut long = read.clone();
-        long.push(0);
-        assert!(!request_complete(&long));
-    }
-
-    #[test]
-    fn a_request_after_noise_is_found_at_the_end() {
-        let read = frame(&[1, 4, 0, 0, 0, 18]);
-        let fc16 = frame(&[1, 16, 0, 0, 0, 2, 4, 0x13, 0x88, 0, 1]);
-        for req in [&read, &fc16] {
-            assert_eq!(request_at_end(req), Some(0));
-            let mut noisy = vec![0x55; 300];
-            noisy.extend_from_slice(req);
-            assert_eq!(request_at_end(&noisy), Some(300), "{req:02x?}");
-            assert_eq!(request_at_end(&noisy[..noisy.len() - 1]), None);
-        }
-        assert_eq!(request_at_end(&[0x55; 300]), None);
-        assert_eq!(request_at_end(&[]), None);
-        // A long write whose data holds a valid read request is not cut at that request.
-        let inner = frame(&[1, 3, 0, 0, 0, 1]);
-        let mut body = vec![1, 16, 0, 0, 0, 8, 16];
-        body.extend_from_slice(&inner);
-        body.extend_from_slice(&[0; 8]);
-        let long = frame(&body);
-        for k in 1..long.len() {
-            assert_eq!(request_at_end(&long[..k]), None, "{k} bytes");
-        }
-        assert_eq!(request_at_end(&long), Some(0));
-        // A whole long write (a read request inside its data) is taken whole: the whole
-        // buffer is checked before any tail of it.
-        let mut body = vec![1, 16, 0, 0, 0, 4, 8];
-        body.extend_from_slice(&frame(&[1, 4, 0, 0, 0, 1])[..6]);
-        let tail = crc16(&[1, 4, 0, 0, 0, 1]).to_le_bytes();
-        body.extend_from_slice(&tail);
-        let whole = frame(&body);
-        assert_eq!(
-            request_at_end(&whole),
-            Some(0),
-            "the whole frame, not its tail"
-        );
-        // A truncated request and a whole one right after it: the whole one is found.
-        let mut split = read[..5].to_vec();
-        split.extend_from_slice(&read);
-        assert_eq!(request_at_end(&split), Some(5));
     }
 
     #[test]

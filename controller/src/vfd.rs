@@ -18,16 +18,15 @@
 //!   invalid ([`VfdMaster::readings`] is `None`); the next good read makes them valid again.
 //!   A drive that takes writes but fails reads leaves the link up and the controller blind.
 //!
-//! Requests come from `rmodbus`; responses are checked here, strictly (exact length, CRC,
-//! unit, function, byte count): rmodbus's client parser accepts length mismatches and its
-//! `parse_u16` underflows on a read response with a zero byte count.
+//! Requests come from `rmodbus`'s client; responses pass the crate's RTU gate
+//! ([`crate::modbus::gate`]: length, unit, CRC) and are then checked here, strictly (function,
+//! exact length, byte count, the write's echo): rmodbus's client parser is not used, for its
+//! defects 5 to 7 listed in [`crate::modbus`].
 
-use crate::scada::{crc16, MAX_FRAME};
+use crate::modbus::{gate, Frame};
 use rmodbus::client::ModbusRequest;
 use rmodbus::ModbusProto;
 
-/// A request or response buffer.
-pub type Frame = heapless::Vec<u8, MAX_FRAME>;
 /// Largest read block, registers.
 pub const MAX_READ: u16 = 8;
 
@@ -350,48 +349,49 @@ impl VfdMaster {
     }
 
     fn check(&mut self, kind: Kind, f: &[u8]) -> Answer {
-        let n = f.len();
-        if n < 5
-            || f[0] != self.map.unit
-            || crc16(&f[..n - 2]) != u16::from_le_bytes([f[n - 2], f[n - 1]])
-        {
+        let Some(pdu) = gate(f, self.map.unit) else {
             return Answer::Ignore;
-        }
+        };
         let func = match kind {
             Kind::WriteTorque(_) => 6,
             Kind::Read => 3,
         };
-        if f[1] == func | 0x80 {
-            return if n == 5 {
+        if pdu.function == func | 0x80 {
+            return if pdu.data.len() == 1 {
                 Answer::Exception
             } else {
                 Answer::Ignore
             };
         }
-        if f[1] != func {
+        if pdu.function != func {
             return Answer::Ignore;
         }
         match kind {
             Kind::WriteTorque(counts) => {
-                let mut echo = [0u8; 6];
-                echo[0] = self.map.unit;
-                echo[1] = 6;
-                echo[2..4].copy_from_slice(&self.map.torque_ref_register.to_be_bytes());
-                echo[4..6].copy_from_slice(&counts.to_be_bytes());
-                if n == 8 && f[..6] == echo {
+                // The echo: register and value as written (the frame is then 8 bytes).
+                let mut echo = [0u8; 4];
+                echo[..2].copy_from_slice(&self.map.torque_ref_register.to_be_bytes());
+                echo[2..].copy_from_slice(&counts.to_be_bytes());
+                if pdu.data == echo {
                     Answer::Ok
                 } else {
                     Answer::Ignore
                 }
             }
             Kind::Read => {
+                // Byte count, then exactly that many bytes: the block asked for.
                 let bytes = 2 * usize::from(self.map.read_count);
-                if n != 5 + bytes || usize::from(f[2]) != bytes {
+                let Some((&count, words)) = pdu.data.split_first() else {
+                    return Answer::Ignore;
+                };
+                if usize::from(count) != bytes || words.len() != bytes {
                     return Answer::Ignore;
                 }
                 let word = |i: u16| {
-                    let at = 3 + 2 * usize::from(i);
-                    u16::from_be_bytes([f[at], f[at + 1]])
+                    let at = 2 * usize::from(i);
+                    words
+                        .get(at..at + 2)
+                        .map_or(0, |w| u16::from_be_bytes([w[0], w[1]]))
                 };
                 let m = &self.map;
                 self.readings = VfdReadings {
@@ -415,6 +415,7 @@ enum Answer {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::modbus::crc16;
 
     /// The example map without the cycle: each exchange starts as soon as the last one ends,
     /// so the tests step the link exchange by exchange.
@@ -440,7 +441,7 @@ mod tests {
                 } else {
                     let body = [1u8, 3, 6, 0, 100, 0, 50, 0, 1];
                     answer.extend_from_slice(&body).unwrap();
-                    let crc = crate::scada::crc16(&body);
+                    let crc = crate::modbus::crc16(&body);
                     answer.extend_from_slice(&crc.to_le_bytes()).unwrap();
                 }
                 m.receive(&answer);

@@ -5,8 +5,8 @@
 use controller::bench::{VirtualBenchConfig, VirtualBoard, VirtualIo};
 use controller::control::{Config, LogLine, NarmaxModel};
 use controller::link::VfdPort;
-use controller::scada::{crc16, Mode, Response};
-use controller::vfd::Frame;
+use controller::modbus::{crc16, Frame};
+use controller::scada::Mode;
 use model_core::WhiteBox;
 
 /// The firmware's models, the very files it compiles in.
@@ -49,7 +49,7 @@ fn with_crc(body: &[u8]) -> Vec<u8> {
 }
 
 fn read_inputs(b: &mut Board) -> Vec<u16> {
-    let mut r = Response::new();
+    let mut r = Frame::new();
     let n = b
         .scada
         .handle(&with_crc(&[1, 4, 0, 0, 0, 18]), &mut r)
@@ -71,7 +71,7 @@ fn manual_50_pct_reaches_the_operating_point_in_3_s() {
     run(&mut b, 500);
     assert_eq!(b.io.torque_ref_pct(), 0.0);
     // What a SCADA does: setpoint 50 %, manual mode (FC 16).
-    let mut r = Response::new();
+    let mut r = Frame::new();
     let req = with_crc(&[1, 16, 0, 0, 0, 2, 4, 0x13, 0x88, 0, 1]);
     assert!(b.scada.handle(&req, &mut r).is_some());
     run(&mut b, 3000);
@@ -195,7 +195,7 @@ fn profile_logs_once_a_second_and_repeats_from_its_seed() {
 fn fixed_point_narmax_follows_f32() {
     let mut a = setup(Mode::Profile, 0);
     let mut b = setup(Mode::Profile, 0);
-    let mut r = Response::new();
+    let mut r = Frame::new();
     b.scada
         .handle(&with_crc(&[1, 6, 0, 2, 0, 1]), &mut r)
         .unwrap();
@@ -304,14 +304,14 @@ fn a_drive_that_takes_no_writes_forces_zero_and_one_that_gives_no_reads_is_flagg
 
 fn write_holding(b: &mut Board, register: u8, value: u16) {
     let [hi, lo] = value.to_be_bytes();
-    let mut r = Response::new();
+    let mut r = Frame::new();
     let req = with_crc(&[1, 6, 0, register, hi, lo]);
     let n = b.scada.handle(&req, &mut r).expect("an answer");
     assert_eq!(&r[..n], &req[..], "write of holding {register} echoed");
 }
 
 fn read_observer(b: &mut Board) -> (f32, f32, f32, u16) {
-    let mut r = Response::new();
+    let mut r = Frame::new();
     let n = b
         .scada
         .handle(&with_crc(&[1, 4, 0, 18, 0, 5]), &mut r)
@@ -392,7 +392,7 @@ fn no_alarm_from_rest_through_a_minute_of_pulses() {
     let mut b = setup(Mode::Stop, 0);
     run(&mut b, 5000);
     assert_eq!(read_observer(&mut b).3, 0, "at rest");
-    let mut r = Response::new();
+    let mut r = Frame::new();
     b.scada
         .handle(&with_crc(&[1, 6, 0, 1, 0, 2]), &mut r)
         .unwrap();

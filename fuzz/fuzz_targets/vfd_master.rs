@@ -1,7 +1,8 @@
 //! Any response bytes, cut into frames by the first byte: the master never panics and its
 //! outputs stay finite and in range.
 #![no_main]
-use controller::vfd::{Frame, VfdMap, VfdMaster};
+use controller::modbus::Frame;
+use controller::vfd::{VfdMap, VfdMaster};
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {

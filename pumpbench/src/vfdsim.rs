@@ -5,7 +5,8 @@
 
 use crate::Failure;
 use controller::bench::{VirtualBench, VirtualBenchConfig};
-use controller::rtu::{Frame, RtuFramer};
+use controller::modbus::Frame;
+use controller::rtu::RtuFramer;
 use controller::vfd::VfdMap;
 use controller::vfdsim::{DriveValues, VfdSim};
 use nix::sys::termios::{self, SetArg};
@@ -23,7 +24,7 @@ pub struct Options {
     pub counts_per_100_pct: u16,
     /// rpm per count of the speed register.
     pub rpm_per_count: f32,
-    /// Silence that ends a frame, ms.
+    /// Silence that ends a frame, ms (the framer counts µs: 1000 × this, saturating).
     pub idle_ms: u32,
     /// Stop after this long, s (None: until killed).
     pub seconds: Option<f64>,
@@ -73,7 +74,7 @@ pub fn run(port: &Path, o: &Options) -> Result<(), Failure> {
         map.read_start
     );
     let start = Instant::now();
-    let mut framer = RtuFramer::new(o.idle_ms);
+    let mut framer = RtuFramer::new(o.idle_ms.saturating_mul(1000));
     let (mut frame, mut answer) = (Frame::new(), Frame::new());
     let mut sim_ms: u64 = 0;
     let mut buf = [0u8; 256];
@@ -84,10 +85,12 @@ pub fn run(port: &Path, o: &Options) -> Result<(), Failure> {
     loop {
         let elapsed = start.elapsed();
         let now_ms = elapsed.as_millis() as u64;
+        // The framer's clock: µs, wrapping.
+        let now_us = elapsed.as_micros() as u32;
         match file.read(&mut buf) {
             Ok(n) => {
                 for &b in &buf[..n] {
-                    framer.push(b, now_ms as u32);
+                    framer.push(b, now_us);
                 }
             }
             Err(e) if e.kind() == ErrorKind::WouldBlock => {}
@@ -111,7 +114,7 @@ pub fn run(port: &Path, o: &Options) -> Result<(), Failure> {
                 );
             }
         }
-        if framer.poll(now_ms as u32, &mut frame) {
+        if framer.poll(now_us, &mut frame) {
             let values = DriveValues {
                 speed_rpm: bench.signals().speed_rpm,
                 torque_pct: sim.torque_ref_pct(),

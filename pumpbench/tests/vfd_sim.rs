@@ -3,7 +3,8 @@
 //! the speed read back is the bench's, and when the simulator goes away the master raises the
 //! link alarm and forces 0 % torque.
 
-use controller::rtu::{Frame, RtuFramer};
+use controller::modbus::Frame;
+use controller::rtu::RtuFramer;
 use controller::vfd::{VfdMap, VfdMaster};
 use nix::fcntl::{fcntl, FcntlArg, OFlag};
 use nix::pty::openpty;
@@ -14,22 +15,25 @@ use std::time::{Duration, Instant};
 
 /// Runs the master for `ms` milliseconds of wall time against whatever is on `port`.
 fn drive(m: &mut VfdMaster, port: &mut std::fs::File, start: Instant, ms: u64, pct: f32) {
-    let mut framer = RtuFramer::new(5);
+    let mut framer = RtuFramer::new(5_000);
     let (mut out, mut frame) = (Frame::new(), Frame::new());
     let mut buf = [0u8; 256];
     let end = start.elapsed().as_millis() as u64 + ms;
     loop {
-        let now = start.elapsed().as_millis() as u64;
+        let elapsed = start.elapsed();
+        let now = elapsed.as_millis() as u64;
+        // The framer's clock: µs, wrapping.
+        let now_us = elapsed.as_micros() as u32;
         if now >= end {
             return;
         }
         match port.read(&mut buf) {
-            Ok(n) => buf[..n].iter().for_each(|&b| framer.push(b, now as u32)),
+            Ok(n) => buf[..n].iter().for_each(|&b| framer.push(b, now_us)),
             Err(e) if e.kind() == ErrorKind::WouldBlock => {}
             Err(e) if e.raw_os_error() == Some(nix::libc::EIO) => {}
             Err(e) => panic!("pty: {e}"),
         }
-        if framer.poll(now as u32, &mut frame) {
+        if framer.poll(now_us, &mut frame) {
             m.receive(&frame);
         }
         if m.poll(now as u32, &mut out).is_some() || m.start(now as u32, pct, &mut out).is_some() {

@@ -669,7 +669,7 @@ mod e2e {
 mod line {
     use super::Result;
     use crate::bridge::Bridge;
-    use controller::scada::crc16;
+    use controller::modbus::crc16;
     use nix::fcntl::{open, OFlag};
     use nix::poll::{poll, PollFd, PollFlags, PollTimeout};
     use nix::sys::stat::Mode;
