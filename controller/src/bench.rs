@@ -13,7 +13,9 @@
 //! (±3.46 σ), cheap on an MCU without `log`/`cos`, and the same sequence on host and target.
 
 use crate::analog::{LoopConfig, VALID_HIGH_MA, VALID_LOW_MA};
-use crate::control::{Config, Controller, Error, Inputs, NarmaxModel, Outputs};
+use crate::control::{
+    Commands, Config, Controller, Error, Inputs, NarmaxModel, Outputs, VfdStatus,
+};
 use crate::link::{ScadaLink, VfdLink, VfdPort};
 use crate::modbus::Frame;
 use crate::vfd::VfdMap;
@@ -339,20 +341,20 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
         })
     }
 
-    /// The inputs of the next step: the codes due (see [`Controller::samples_due`]), the
-    /// SCADA's commands and the VFD link's status.
+    /// The inputs of the next step: the codes due (see [`Controller::samples_due`]) from the
+    /// bench's transmitters, the SCADA's `commands` and the VFD link's `vfd` status.
     pub fn inputs(
         controller: &Controller<NP, HP, NF, HF>,
         io: &mut VirtualIo,
-        scada: &ScadaLink,
-        vfd: &VfdLink,
+        commands: Commands,
+        vfd: VfdStatus,
     ) -> Inputs {
         let (p, q) = controller.samples_due();
         Inputs {
             pressure_code: if p { io.bench.pressure_code() } else { 0 },
             flow_code: if q { io.bench.flow_code() } else { 0 },
-            commands: scada.commands(),
-            vfd: vfd.status(),
+            commands,
+            vfd,
         }
     }
 
@@ -376,7 +378,12 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
     /// published values and the VFD link its pass at the step's time with the requested
     /// torque, as the firmware's lower-priority tasks do after each control step.
     pub fn tick(&mut self) -> Result<Outputs, BenchError> {
-        let inputs = Self::inputs(&self.controller, &mut self.io, &self.scada, &self.vfd);
+        let inputs = Self::inputs(
+            &self.controller,
+            &mut self.io,
+            self.scada.commands(),
+            self.vfd.status(),
+        );
         let out = Self::control(&mut self.controller, &mut self.io, &inputs)?;
         self.scada.publish(&out.published);
         self.vfd

@@ -181,101 +181,53 @@ pub struct LogLine {
     pub values: Published,
 }
 
-/// Writes `x` with `decimals` (≤ 6) decimals, rounded, without core's float formatting
-/// (≈ 7 KB of flash); non-finite values print as `nan`.
-pub fn write_fixed(out: &mut impl core::fmt::Write, x: f32, decimals: u32) -> core::fmt::Result {
-    if !x.is_finite() {
-        return out.write_str("nan");
-    }
-    // f32 and u32 only: f64 and u64 arithmetic are software routines on the M4 (≈ 1 KB of
-    // flash for u64 division alone). Values whose scaled magnitude passes u32 print `ovf`.
-    let d = decimals.min(6);
-    let scale = 10u32.pow(d);
-    let v = x.abs() * scale as f32 + 0.5;
-    if v >= 4.294_967e9 {
-        return out.write_str("ovf");
-    }
-    let a = v as u32;
-    if x < 0.0 && a != 0 {
-        out.write_char('-')?;
-    }
-    write!(out, "{}.{:0w$}", a / scale, a % scale, w = d as usize)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::write_fixed;
-
-    fn fixed(x: f32, d: u32) -> String {
-        let mut s = String::new();
-        write_fixed(&mut s, x, d).unwrap();
-        s
-    }
-
-    #[test]
-    fn fixed_point_text() {
-        assert_eq!(fixed(1233.94, 1), "1233.9");
-        assert_eq!(fixed(2.7106, 3), "2.711");
-        assert_eq!(fixed(-0.0125, 3), "-0.013");
-        assert_eq!(fixed(-0.0004, 3), "0.000", "no sign on a rounded zero");
-        assert_eq!(fixed(0.11052, 5), "0.11052");
-        assert_eq!(fixed(50.0, 2), "50.00");
-        assert_eq!(fixed(f32::NAN, 2), "nan");
-        assert_eq!(fixed(1e9, 3), "ovf");
-        assert_eq!(fixed(-1e9, 3), "ovf");
-    }
-}
-
 impl LogLine {
-    /// The line as text, e.g. `t_s=3 mode=manual u_pct=50.00 p_mca=… bits=…` (see the
-    /// README); `bits=` holds the raw f32 bits of measured and predicted values, which the
-    /// QEMU check compares with the host.
-    pub fn write_text(&self, out: &mut impl core::fmt::Write) -> core::fmt::Result {
+    /// The line's values, each with its name (unit in the name), in the order they are
+    /// logged: torque, measured, white-box and NARMAX values, residuals, the drive's speed and
+    /// the observer's estimates.
+    pub fn fields(&self) -> [(&'static str, f32); 16] {
         let v = &self.values;
-        write!(
-            out,
-            "t_s={} mode={} narmax={} u_pct=",
+        [
+            ("u_pct", v.torque_pct),
+            ("p_mca", v.pressure_mca),
+            ("q_lps", v.flow_lps),
+            ("wb_rpm", v.whitebox_speed_rpm),
+            ("wb_p", v.whitebox_pressure_mca),
+            ("wb_q", v.whitebox_flow_lps),
+            ("nx_p", v.narmax_pressure_mca),
+            ("nx_q", v.narmax_flow_lps),
+            ("res_wb_p", v.whitebox_pressure_residual_mca),
+            ("res_wb_q", v.whitebox_flow_residual_lps),
+            ("res_nx_p", v.narmax_pressure_residual_mca),
+            ("res_nx_q", v.narmax_flow_residual_lps),
+            ("vfd_rpm", v.vfd_speed_rpm),
+            ("ob_rpm", v.observer_speed_rpm),
+            ("ob_q", v.observer_flow_lps),
+            ("ob_k2", v.observer_valve_k2),
+        ]
+    }
+}
+
+/// The line as defmt sends it: `t_s=3 mode=manual narmax=f32 u_pct=50.0 p_mca=… alarms=0
+/// status=9`. The values travel as f32 bits; the host prints them in their shortest exact
+/// form (`ryu`, as defmt's decoder does), so the QEMU check compares every bit.
+#[cfg(feature = "defmt")]
+impl defmt::Format for LogLine {
+    fn format(&self, f: defmt::Formatter) {
+        // One format string (interned: only the values travel), the names of
+        // [`LogLine::fields`] in their order; the QEMU check rebuilds the line from them.
+        let [u, p, q, wb_rpm, wb_p, wb_q, nx_p, nx_q, r_wb_p, r_wb_q, r_nx_p, r_nx_q, vfd, ob_rpm, ob_q, ob_k2] =
+            self.fields().map(|(_, x)| x);
+        defmt::write!(
+            f,
+            "t_s={=u32} mode={=str} narmax={=str} u_pct={=f32} p_mca={=f32} q_lps={=f32} wb_rpm={=f32} wb_p={=f32} wb_q={=f32} nx_p={=f32} nx_q={=f32} res_wb_p={=f32} res_wb_q={=f32} res_nx_p={=f32} res_nx_q={=f32} vfd_rpm={=f32} ob_rpm={=f32} ob_q={=f32} ob_k2={=f32} alarms={=u16} status={=u16}",
             self.t_ms / 1000,
             self.mode.name(),
-            self.arithmetic.name()
-        )?;
-        let fields: [(&str, f32, u32); 12] = [
-            ("", v.torque_pct, 2),
-            (" p_mca=", v.pressure_mca, 3),
-            (" q_lps=", v.flow_lps, 2),
-            (" wb_rpm=", v.whitebox_speed_rpm, 1),
-            (" wb_p=", v.whitebox_pressure_mca, 3),
-            (" wb_q=", v.whitebox_flow_lps, 2),
-            (" nx_p=", v.narmax_pressure_mca, 3),
-            (" nx_q=", v.narmax_flow_lps, 2),
-            (" res_wb_p=", v.whitebox_pressure_residual_mca, 3),
-            (" res_wb_q=", v.whitebox_flow_residual_lps, 2),
-            (" res_nx_p=", v.narmax_pressure_residual_mca, 3),
-            (" res_nx_q=", v.narmax_flow_residual_lps, 2),
-        ];
-        for (name, x, d) in fields {
-            out.write_str(name)?;
-            write_fixed(out, x, d)?;
-        }
-        write!(out, " vfd_rpm=")?;
-        write_fixed(out, v.vfd_speed_rpm, 1)?;
-        out.write_str(" ob_rpm=")?;
-        write_fixed(out, v.observer_speed_rpm, 1)?;
-        out.write_str(" ob_q=")?;
-        write_fixed(out, v.observer_flow_lps, 2)?;
-        out.write_str(" ob_k2=")?;
-        write_fixed(out, v.observer_valve_k2, 5)?;
-        write!(out, " alarms={:#04x}", v.alarms)?;
-        write!(
-            out,
-            " status={:#04x} bits={:08x},{:08x},{:08x},{:08x},{:08x}",
-            v.status.bits(),
-            v.whitebox_speed_rpm.to_bits(),
-            v.pressure_mca.to_bits(),
-            v.flow_lps.to_bits(),
-            v.narmax_pressure_mca.to_bits(),
-            v.narmax_flow_lps.to_bits()
-        )
+            self.arithmetic.name(),
+            u, p, q, wb_rpm, wb_p, wb_q, nx_p, nx_q, r_wb_p, r_wb_q, r_nx_p, r_nx_q, vfd, ob_rpm, ob_q, ob_k2,
+            self.values.alarms,
+            self.values.status.bits()
+        );
     }
 }
 

@@ -150,6 +150,7 @@ impl RtuFramer {
 
 /// Error counts of an [`Rs485`] port since it was made, each wrapping at 2³².
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Errors {
     /// Receive overruns (bytes lost: the receiver was not read in time).
     pub overrun: u32,

@@ -72,6 +72,7 @@ pub const SETPOINT_MAX: u16 = 10_000;
 
 /// Operating mode (holding register 1).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Mode {
     /// Torque reference 0.
     #[default]
@@ -84,6 +85,7 @@ pub enum Mode {
 
 /// Arithmetic of the NARMAX pass (holding register 2).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Arithmetic {
     /// f32 forward pass.
     #[default]
@@ -133,6 +135,7 @@ impl Mode {
 
 /// Status bits of input register 0.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Status {
     /// Bit 0: the drive is commanded to run.
     pub running: bool,
@@ -171,6 +174,7 @@ impl Status {
 
 /// What the controller publishes, in engineering units (converted and clamped here).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Published {
     /// Status bits.
     pub status: Status,

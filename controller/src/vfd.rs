@@ -113,6 +113,7 @@ impl VfdMap {
 
 /// What the drive last reported.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct VfdReadings {
     /// Actual speed, rpm.
     pub speed_rpm: f32,

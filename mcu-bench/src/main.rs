@@ -367,7 +367,8 @@ fn tick(c: &mut Cost, n: u32) -> Result<(), Error> {
     let mut b = VirtualBoard::new(&config, p, q, VirtualBenchConfig::default_offsets(SEED))
         .map_err(|_| "controller refused its configuration")?;
     for _ in 0..n {
-        let inputs = VirtualBoard::inputs(&b.controller, &mut b.io, &b.scada, &b.vfd);
+        let inputs =
+            VirtualBoard::inputs(&b.controller, &mut b.io, b.scada.commands(), b.vfd.status());
         let out = c.time(|| b.controller.step(black_box(&inputs)));
         b.io.set_torque_ref(out.torque_ref_pct);
         if let Some(x) = out.bench {

@@ -343,11 +343,11 @@ pub fn run_bench(o: &Options) -> Result {
         ),
         Err(_) => None,
     };
-    // The firmware images (the same ELF path: measured right after each build).
+    // The firmware images, one per board crate.
     let mut images = BTreeMap::new();
     for board in [Board::Nucleo, Board::Qemu] {
         build_firmware(board)?;
-        let (size, largest, soft_f64) = read_elf(&firmware_elf(), 10)?;
+        let (size, largest, soft_f64) = read_elf(&firmware_elf(board), 10)?;
         let budget = board.budget();
         images.insert(
             board.key(),

@@ -16,6 +16,7 @@
 
 mod bench;
 mod bridge;
+mod defmt_log;
 
 /// The firmware's NARMAX models, the very files it compiles in.
 #[path = "../../firmware/src/models/flow.rs"]
@@ -65,9 +66,12 @@ fn target_dir() -> PathBuf {
         .unwrap_or_else(|| root().join("target"))
 }
 
-/// The firmware image last built (either board's: both build to this path).
-fn firmware_elf() -> PathBuf {
-    target_dir().join(TARGET).join("firmware").join("firmware")
+/// A board's firmware image (profile `firmware`).
+fn firmware_elf(board: Board) -> PathBuf {
+    target_dir()
+        .join(TARGET)
+        .join("firmware")
+        .join(board.binary())
 }
 
 /// Flash and static RAM budget of an image, bytes.
@@ -115,15 +119,37 @@ impl Board {
             Board::Nucleo => NUCLEO_BUDGET,
         }
     }
-    fn feature_args(self) -> &'static [&'static str] {
+    /// The board's crate.
+    fn package(self) -> &'static str {
         match self {
-            Board::Qemu => &[],
-            Board::Nucleo => &["--no-default-features", "--features", "nucleo-f446re"],
+            Board::Qemu => "board-qemu",
+            Board::Nucleo => "board-nucleo-f446re",
+        }
+    }
+    /// The board's firmware binary.
+    fn binary(self) -> &'static str {
+        match self {
+            Board::Qemu => "pump-qemu",
+            Board::Nucleo => "pump-nucleo-f446re",
         }
     }
 }
 
+/// `flip-link` (the linker `.cargo/config.toml` names for the MCU: it puts the stack below
+/// the static data, so an overflow faults instead of corrupting them), installed with
+/// `cargo install --locked` (≈ 10 s) if it is not on the PATH.
+fn ensure_flip_link() -> Result {
+    if Command::new("flip-link").arg("--version").output().is_ok() {
+        return Ok(());
+    }
+    run(
+        "install flip-link (the MCU images' linker)",
+        cargo().args(["install", "--locked", "flip-link"]),
+    )
+}
+
 fn build_firmware(board: Board) -> Result {
+    ensure_flip_link()?;
     run(
         &format!(
             "firmware build for {} (profile firmware: opt-level s, LTO)",
@@ -133,20 +159,20 @@ fn build_firmware(board: Board) -> Result {
             .args([
                 "build",
                 "-p",
-                "firmware",
+                board.package(),
                 "--profile",
                 "firmware",
                 "--target",
                 TARGET,
             ])
-            .args(board.feature_args())
             .env("DEFMT_LOG", "info"),
     )
 }
 
 /// QEMU's command line for the firmware, with semihosting arguments `args`.
 fn qemu_command(elf: &Path, args: &[String]) -> Command {
-    let mut semihosting = String::from("enable=on,target=native,arg=firmware");
+    let name = elf.file_name().unwrap_or_default().to_string_lossy();
+    let mut semihosting = format!("enable=on,target=native,arg={name}");
     for a in args {
         semihosting.push_str(",arg=");
         semihosting.push_str(a);
@@ -176,6 +202,40 @@ fn qemu_output(elf: &Path, args: &[String]) -> Result<String> {
             format!("cannot start qemu-system-arm (apt-get install qemu-system-arm): {e}")
         })?;
     let text = String::from_utf8_lossy(&out.stdout).into_owned();
+    let name = elf.file_name().unwrap_or_default().to_string_lossy();
+    eprintln!(
+        "    qemu {name} {}: {:.1} s, {}",
+        args.join(" "),
+        start.elapsed().as_secs_f64(),
+        out.status
+    );
+    if !out.status.success() {
+        return Err(format!(
+            "{name} in QEMU exited with {}:\n{text}",
+            out.status
+        ));
+    }
+    Ok(text)
+}
+
+/// Runs a board's image in QEMU to its end as [`qemu_output`] does, its serial ports
+/// unconnected; returns its defmt log, decoded.
+fn qemu_log(elf: &Path, args: &[String]) -> Result<String> {
+    let start = Instant::now();
+    let mut cmd = qemu_command(elf, args);
+    cmd.args(["-display", "none", "-monitor", "none", "-serial", "null"])
+        .args(["-serial", "null", "-icount", "shift=0,sleep=off"]);
+    let out = Command::new("timeout")
+        .arg(QEMU_TIMEOUT_S.to_string())
+        .arg(cmd.get_program())
+        .args(cmd.get_args())
+        .stdin(Stdio::null())
+        .stderr(Stdio::inherit())
+        .output()
+        .map_err(|e| {
+            format!("cannot start qemu-system-arm (apt-get install qemu-system-arm): {e}")
+        })?;
+    let text = defmt_log::decode(elf, &out.stdout)?;
     let name = elf.file_name().unwrap_or_default().to_string_lossy();
     eprintln!(
         "    qemu {name} {}: {:.1} s, {}",
@@ -246,12 +306,30 @@ fn host_replay(header: &str, run_ms: u32) -> Result<Vec<String>> {
     let mut lines = vec![];
     for _ in 0..=run_ms {
         if let Some(log) = board.tick().map_err(|e| e.to_string())?.log {
-            let mut text = String::new();
-            log.write_text(&mut text).map_err(|e| e.to_string())?;
-            lines.push(text);
+            lines.push(log_text(&log));
         }
     }
     Ok(lines)
+}
+
+/// A log line as the firmware's defmt line decodes: the same names, f32 values printed by
+/// `ryu` as defmt's decoder prints them (the shortest text that reads back to the same bits).
+fn log_text(log: &controller::control::LogLine) -> String {
+    let mut s = format!(
+        "t_s={} mode={} narmax={}",
+        log.t_ms / 1000,
+        log.mode.name(),
+        log.arithmetic.name()
+    );
+    for (name, x) in log.fields() {
+        s.push_str(&format!(" {name}={}", ryu::Buffer::new().format(x)));
+    }
+    s.push_str(&format!(
+        " alarms={} status={}",
+        log.values.alarms,
+        log.values.status.bits()
+    ));
+    s
 }
 
 /// Checks the firmware's log lines against the host replay, text and f32 bits.
@@ -260,7 +338,7 @@ fn check_golden(output: &str, run_ms: u32) -> Result<usize> {
         .lines()
         .find(|l| l.starts_with("firmware:"))
         .ok_or("no 'firmware:' header line")?;
-    if !output.lines().any(|l| l == "done") {
+    if !output.lines().any(|l| l.starts_with("done")) {
         return Err("the firmware did not print 'done'".into());
     }
     let target: Vec<&str> = output.lines().filter(|l| l.starts_with("t_s=")).collect();
@@ -342,7 +420,7 @@ const BENCH_USAGE: &str = "usage: cargo xtask bench [--save-baseline]
 fn qemu(args: &[String]) -> Result {
     let o = parse_qemu_options(args)?;
     build_firmware(Board::Qemu)?;
-    let elf = firmware_elf();
+    let elf = firmware_elf(Board::Qemu);
     let mut fw_args = o.firmware_args.clone();
     if o.vfd.is_some() {
         fw_args.push("vfd=uart".into());
@@ -368,7 +446,7 @@ fn qemu(args: &[String]) -> Result {
                 Err(format!("qemu: {status}"))
             };
         }
-        let (mut qemu, bridge, _) = e2e::start_pty(cmd, true)?;
+        let (mut qemu, bridge, _) = e2e::start_pty(&elf, cmd, true)?;
         let pty = bridge.path.clone();
         eprintln!(
             "SCADA slave (unit 1, RTU 19200 8N1) on {pty}; e.g.\n  mbpoll -m rtu -b 19200 -P none -a 1 -t 3 -r 1 -c 18 {pty}\n  mbpoll -m rtu -b 19200 -P none -a 1 -t 4 -r 1 -1 {pty} 5000 1"
@@ -396,7 +474,7 @@ fn qemu(args: &[String]) -> Result {
         fw_args.push("mode=2".into());
     }
     fw_args.push(format!("run_ms={}", o.seconds * 1000 + 1));
-    print!("{}", qemu_output(&elf, &fw_args)?);
+    print!("{}", qemu_log(&elf, &fw_args)?);
     Ok(())
 }
 
@@ -449,6 +527,7 @@ mod e2e {
     /// dropped), the [`bridge`](crate::bridge) that offers clients the port as a line (its
     /// `path`), and QEMU's output lines (also echoed to the terminal if `echo`).
     pub fn start_pty(
+        elf: &Path,
         mut cmd: Command,
         echo: bool,
     ) -> Result<(
@@ -476,12 +555,48 @@ mod e2e {
                 let _ = tx.send(line);
             }
         });
+        // Standard output: QEMU's own text lines first (the pty's name), then the firmware's
+        // defmt frames.
+        let mut decoder = crate::defmt_log::LogDecoder::new(elf)?;
         std::thread::spawn(move || {
-            for line in BufReader::new(stdout).lines().map_while(|l| l.ok()) {
-                if echo {
-                    println!("{line}");
+            const QEMU_LINE: &[u8] = b"char device redirected to ";
+            let mut stdout = stdout;
+            let mut pending = Vec::new();
+            let mut frames = false;
+            let mut buf = [0u8; 4096];
+            while let Ok(n) = std::io::Read::read(&mut stdout, &mut buf) {
+                if n == 0 {
+                    break;
                 }
-                let _ = tx2.send(line);
+                let mut lines = vec![];
+                if frames {
+                    lines = decoder.feed(&buf[..n]).unwrap_or_default();
+                } else {
+                    pending.extend_from_slice(&buf[..n]);
+                    loop {
+                        if pending.starts_with(QEMU_LINE) {
+                            let Some(end) = pending.iter().position(|&b| b == b'\n') else {
+                                break;
+                            };
+                            let line = String::from_utf8_lossy(&pending[..end]).into_owned();
+                            lines.push(line.trim_end().to_string());
+                            pending.drain(..=end);
+                        } else if QEMU_LINE.starts_with(&pending) {
+                            break; // too short to tell yet
+                        } else {
+                            frames = true;
+                            lines.extend(decoder.feed(&pending).unwrap_or_default());
+                            pending.clear();
+                            break;
+                        }
+                    }
+                }
+                for line in lines {
+                    if echo {
+                        println!("{line}");
+                    }
+                    let _ = tx2.send(line);
+                }
             }
         });
         let deadline = Instant::now() + Duration::from_secs(20);
@@ -579,7 +694,7 @@ mod e2e {
         let mut cmd = qemu_command(elf, &["mode=0".into()]);
         cmd.args(["-display", "none", "-monitor", "none"])
             .args(["-serial", "pty", "-serial", "null"]);
-        let (qemu, bridge, _) = start_pty(cmd, false)?;
+        let (qemu, bridge, _) = start_pty(elf, cmd, false)?;
         let pty = bridge.path.clone();
         let mut report = format!("SCADA on {pty}\n");
 
@@ -892,11 +1007,10 @@ fn test() -> Result {
     )?;
     for board in [Board::Qemu, Board::Nucleo] {
         run(
-            &format!("clippy (firmware, {})", board.name()),
+            &format!("clippy (board {})", board.name()),
             cargo()
-                .args(["clippy", "-p", "firmware", "--target", TARGET])
-                .args(board.feature_args())
-                .args(["--", "-D", "warnings"]),
+                .args(["clippy", "-p", board.package(), "--target", TARGET])
+                .args(["--profile", "firmware", "--", "-D", "warnings"]),
         )?;
     }
     run(
@@ -935,7 +1049,7 @@ fn test() -> Result {
     )?;
     eprintln!("==> bench: kernels in QEMU, image sizes, budgets");
     bench::run_bench(&bench::Options::default())?;
-    let elf = firmware_elf();
+    let elf = firmware_elf(Board::Qemu);
     build_firmware(Board::Qemu)?;
     eprintln!("==> QEMU runs against the host replay (netduinoplus2, -icount shift=0,sleep=off)");
     const RUN_MS: u32 = 20_000;
@@ -945,7 +1059,7 @@ fn test() -> Result {
             format!("narmax={narmax}"),
             format!("run_ms={}", RUN_MS + 1),
         ];
-        let out = qemu_output(&elf, &args)?;
+        let out = qemu_log(&elf, &args)?;
         let n = check_golden(&out, RUN_MS)?;
         println!(
             "QEMU run, NARMAX {narmax}: {n} log lines (white-box, measured, NARMAX, residuals) equal the host replay, bit for bit"
@@ -973,7 +1087,7 @@ fn main() -> ExitCode {
             Some(other) => Err(format!("unknown option '{other}'\n{BENCH_USAGE}")),
         },
         Some("e2e") => build_firmware(Board::Qemu).and_then(|()| {
-            print!("{}", e2e::run(&firmware_elf())?);
+            print!("{}", e2e::run(&firmware_elf(Board::Qemu))?);
             Ok(())
         }),
         _ => Err(format!("usage: cargo xtask <qemu|bench|test|e2e>\n  qemu   build the firmware and run it in QEMU on the virtual bench\n  bench  the kernels' instructions per call on the MCU, image sizes, checked against bench/baseline.json and the budgets\n  test   fmt, clippy, tests, the bench and its budgets, QEMU runs against the host, mbpoll end to end\n  e2e    only the mbpoll end-to-end test\n{QEMU_USAGE}\n{BENCH_USAGE}")),

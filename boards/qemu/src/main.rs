@@ -1,0 +1,501 @@
+//! The bench controller on QEMU `netduinoplus2` (STM32F405) with the virtual bench on-chip,
+//! as an RTIC 2 application with the schedule of the `firmware` crate:
+//!
+//! | priority | task | here |
+//! |---|---|---|
+//! | 3 | `usart1`, `usart2` | SCADA and VFD bytes into `heapless` queues, frames out |
+//! | 2 | `control` (SysTick) | one [`firmware::Core`] step per elapsed ms, the virtual bench stepped |
+//! | 1 | `scada`, `vfd`, `log` | the SCADA server, the VFD master, defmt lines |
+//! | idle | | `wfi` |
+//!
+//! - The transmitters, the torque output and the drive are [`VirtualIo`]: the white-box
+//!   bench a few percent off the model, transmitter lag, noise and 12-bit ADC codes fed to
+//!   the same scaling and fault checks as on a board. QEMU models no usable ADC and no DAC.
+//! - SCADA: Modbus RTU slave on USART1 (QEMU's first `-serial`). VFD: the in-process drive,
+//!   or with `vfd=uart` the master on USART2 (the second `-serial`).
+//! - Logs: defmt over semihosting (QEMU's stdout); `cargo xtask qemu` decodes them.
+//!
+//! What QEMU 7.2 does not model, and what this board does instead:
+//! - **TIM2..5 interrupts** fire at the wrong rate or not at all, but their counters count
+//!   QEMU's virtual clock: TIM5 runs free at 1 MHz as the time base (µs, ms) and TIM2 at
+//!   1 GHz (virtual ns; instructions under `-icount shift=0`) for the margins. SysTick only
+//!   wakes the control task (4 kHz), which steps once per elapsed TIM5 millisecond: in real
+//!   time QEMU merges SysTick expiries while its thread waits for the host, so counting them
+//!   would lose wall time.
+//! - **The RTU silence** (3.5 characters): QEMU's serial lines carry no timing (a byte is
+//!   handed over as soon as the last one is read). SCADA requests end by their content
+//!   (length and CRC, [`controller::modbus::request_at_end`]) or after [`QEMU_SILENCE_US`];
+//!   the Nucleo ends frames with a timer.
+//! - **USART transmit interrupts** (TXE, TC) never fire: a frame is written out from the
+//!   handler that starts it (QEMU takes each byte at once).
+//! - **RCC PLL**: a PLL-ready wait hangs; the chip stays on its 16 MHz HSI (SysTick and the
+//!   timers run on QEMU's clocks whatever the RCC says).
+//! - **DWT** (reads 0), **GPIO** (writes ignored), **IWDG** (not modelled: no watchdog here).
+#![no_std]
+#![no_main]
+
+mod args;
+
+use cortex_m_semihosting::debug;
+use defmt_semihosting as _;
+use stm32f4xx_hal::pac;
+
+/// SysTick under QEMU, Hz (QEMU clocks it at 168 MHz whatever the RCC says).
+const QEMU_SYSTICK_HZ: u32 = 168_000_000;
+/// SysTick rate, Hz: four wake-ups per control step (see the module docs).
+const WAKE_HZ: u32 = 4000;
+/// Line speed, baud (QEMU's serial back-ends ignore it; a board uses it).
+const BAUD: u32 = 19_200;
+/// Silence that ends an RTU frame under QEMU, µs: QEMU hands over one byte each time the
+/// guest reads the last one, with no line timing, and a busy host can delay a byte by a few
+/// milliseconds; 10 ms keeps frames whole and is far below any master's timeout.
+const QEMU_SILENCE_US: u32 = 10_000;
+
+/// Microseconds from TIM5 running free at 1 MHz (wraps every 71 min).
+fn now_us() -> u32 {
+    // SAFETY: a read of a free-running counter register; TIM5 is set up once in `init` and
+    // never written again.
+    unsafe { (*pac::TIM5::ptr()).cnt().read().bits() }
+}
+
+/// QEMU's virtual nanoseconds from TIM2 running free at 1 GHz (instructions under
+/// `-icount shift=0`; wraps every 4.3 s: for differences only).
+fn now_ns() -> u32 {
+    // SAFETY: as for TIM5.
+    unsafe { (*pac::TIM2::ptr()).cnt().read().bits() }
+}
+
+/// Starts `tim` (TIM2 or TIM5, 32-bit) from 0, free-running at QEMU's 1 GHz / (`psc` + 1),
+/// no interrupts.
+macro_rules! free_running {
+    ($tim:expr, $psc:expr) => {{
+        let t = $tim;
+        t.psc().write(|w| w.psc().set($psc));
+        t.arr().write(|w| w.arr().set(u32::MAX));
+        t.egr().write(|w| w.ug().set_bit());
+        t.cr1().modify(|_, w| w.cen().set_bit());
+    }};
+}
+
+// Fault report: the HardFault handler's frame (or a stack overflow caught by flip-link's
+// layout), logged, then QEMU exits with status 1.
+core::arch::global_asm!(
+    ".section .HardFaultTrampoline, \"ax\"",
+    ".global HardFault",
+    ".type HardFault,%function",
+    ".thumb_func",
+    "HardFault:",
+    // flip-link puts the stack at the bottom of RAM: an overflow leaves SP below it, and the
+    // handler's first push would fault again (lockup). Move SP back to the top first.
+    "  mrs r0, MSP",
+    "  ldr r1, =_stack_end",
+    "  cmp r0, r1",
+    "  bhs 1f",
+    "  ldr r1, =_stack_start",
+    "  msr MSP, r1",
+    "  movs r0, #0",
+    "1:",
+    "  b {handler}",
+    ".ltorg",
+    handler = sym hard_fault,
+);
+
+/// Logs the fault and exits QEMU with status 1.
+///
+/// # Safety
+/// Called only by the `HardFault` trampoline, with the exception frame (or null after a stack
+/// overflow).
+unsafe extern "C" fn hard_fault(ef: *const cortex_m_rt::ExceptionFrame) -> ! {
+    // SAFETY: the trampoline passes the stacked frame, or null.
+    match unsafe { ef.as_ref() } {
+        Some(ef) => defmt::error!(
+            "HardFault at pc={=u32:#010x} lr={=u32:#010x}",
+            ef.pc(),
+            ef.lr()
+        ),
+        None => defmt::error!("HardFault: stack overflow"),
+    }
+    debug::exit(debug::EXIT_FAILURE);
+    #[allow(clippy::empty_loop)]
+    loop {}
+}
+
+/// A panic is logged once and exits QEMU with status 1.
+#[panic_handler]
+fn panic(info: &core::panic::PanicInfo) -> ! {
+    use core::sync::atomic::{AtomicBool, Ordering};
+    static PANICKED: AtomicBool = AtomicBool::new(false);
+    cortex_m::interrupt::disable();
+    if !PANICKED.swap(true, Ordering::Relaxed) {
+        defmt::error!("panic: {}", defmt::Display2Format(info));
+    }
+    debug::exit(debug::EXIT_FAILURE);
+    #[allow(clippy::empty_loop)]
+    loop {}
+}
+
+/// The timing margins of this run (TIM2 counts: instructions under `-icount shift=0`).
+static MARGIN: firmware::Margin = firmware::Margin::new();
+
+/// What the control task asks of the VFD task after a step.
+#[derive(Clone, Copy)]
+struct Request {
+    t_ms: u32,
+    torque_pct: f32,
+}
+
+/// What the log task writes.
+enum LogMsg {
+    Line(controller::control::LogLine),
+    Error(&'static str),
+    Done { failed: bool },
+}
+
+#[rtic::app(device = stm32f4xx_hal::pac, peripherals = true, dispatchers = [EXTI0, EXTI1, EXTI2])]
+mod app {
+    use super::*;
+    use controller::bench::{VirtualBench, VirtualBenchConfig, VirtualBoard, VirtualIo};
+    use controller::control::{Commands, Config, VfdStatus};
+    use controller::link::{ScadaLink, VfdLink};
+    use controller::modbus::{request_at_end, Frame};
+    use controller::rtu::{NoDe, Rs485};
+    use controller::scada::Published;
+    use firmware::port::{PortIsr, PortTask, RX_QUEUE, TX_QUEUE};
+    use firmware::{record_max, Core};
+    use heapless::spsc::Queue;
+    use rtic_sync::channel::{Receiver, Sender};
+    use rtic_sync::make_channel;
+    use stm32f4xx_hal::prelude::*;
+    use stm32f4xx_hal::rcc::Config as RccConfig;
+    use stm32f4xx_hal::serial::{Rx, Serial, Tx};
+
+    type Virtual = VirtualBoard<
+        { firmware::models::pressure::FRAMES },
+        { firmware::models::pressure::HIDDEN },
+        { firmware::models::flow::FRAMES },
+        { firmware::models::flow::HIDDEN },
+    >;
+    type Port1 = PortIsr<Tx<pac::USART1>, Rx<pac::USART1>, NoDe>;
+    type Port2 = PortIsr<Tx<pac::USART2>, Rx<pac::USART2>, NoDe>;
+    const LOG_CAP: usize = 4;
+    const REQ_CAP: usize = 4;
+
+    #[shared]
+    struct Shared {
+        /// The virtual bench: codes and the torque output (control), the drive (VFD task).
+        io: VirtualIo,
+        /// SCADA's holding registers, for the control task.
+        commands: Commands,
+        /// The control task's values, for SCADA.
+        published: Published,
+        /// The VFD link's state, for the control task.
+        vfd_status: VfdStatus,
+    }
+
+    #[local]
+    struct Local {
+        core: Core,
+        ms: firmware::MsClock,
+        run_ms: Option<u32>,
+        stopped: bool,
+        port1: Port1,
+        port2: Port2,
+        scada_port: PortTask,
+        vfd_port: Option<PortTask>,
+        scada: ScadaLink,
+        vfd: VfdLink,
+        scada_wake: Sender<'static, (), 1>,
+        scada_wake_isr: Sender<'static, (), 1>,
+        scada_rx: Receiver<'static, (), 1>,
+        vfd_tx: Sender<'static, Request, REQ_CAP>,
+        vfd_rx: Receiver<'static, Request, REQ_CAP>,
+        log_tx: Sender<'static, LogMsg, LOG_CAP>,
+        log_rx: Receiver<'static, LogMsg, LOG_CAP>,
+    }
+
+    #[init(local = [
+        rx1: Queue<u16, RX_QUEUE> = Queue::new(),
+        tx1: Queue<Frame, TX_QUEUE> = Queue::new(),
+        rx2: Queue<u16, RX_QUEUE> = Queue::new(),
+        tx2: Queue<Frame, TX_QUEUE> = Queue::new(),
+    ])]
+    fn init(cx: init::Context) -> (Shared, Local) {
+        let mut buf = [0u8; 256];
+        let a = match args::parse_args(args::command_line(&mut buf)) {
+            Ok(a) => a,
+            Err(word) => {
+                defmt::error!(
+                    "bad argument '{=[u8]:a}' (see boards/qemu/src/args.rs)",
+                    word
+                );
+                debug::exit(debug::EXIT_FAILURE);
+                #[allow(clippy::empty_loop)]
+                loop {}
+            }
+        };
+        let config = Config {
+            initial_mode: a.mode,
+            initial_setpoint: a.setpoint,
+            profile_seed: u64::from(a.seed),
+            initial_arithmetic: a.arithmetic,
+            virtual_bench: true,
+            ..Config::bench()
+        };
+        let fail = |what: &str| -> ! {
+            defmt::error!("cannot start: {=str}", what);
+            debug::exit(debug::EXIT_FAILURE);
+            #[allow(clippy::empty_loop)]
+            loop {}
+        };
+        let core = firmware::build_core(&config).unwrap_or_else(|_| fail("controller"));
+        let scada = ScadaLink::new(&config).unwrap_or_else(|_| fail("SCADA"));
+        let vfd = VfdLink::new(config.vfd).unwrap_or_else(|_| fail("VFD link"));
+        let bench = VirtualBench::new(VirtualBenchConfig::default_offsets(u64::from(a.seed)))
+            .unwrap_or_else(|_| fail("virtual bench"));
+        let io = VirtualIo::new(bench, config.vfd).unwrap_or_else(|| fail("VFD map"));
+
+        let dp = cx.device;
+        // The time bases (see the module docs).
+        dp.RCC
+            .apb1enr()
+            .modify(|_, w| w.tim2en().set_bit().tim5en().set_bit());
+        free_running!(&dp.TIM5, 999);
+        free_running!(&dp.TIM2, 0);
+        // HSI 16 MHz: QEMU hangs on a PLL-ready wait.
+        let mut rcc = dp.RCC.freeze(RccConfig::hsi());
+        let gpioa = dp.GPIOA.split(&mut rcc);
+        let s1 = Serial::new(dp.USART1, (gpioa.pa9, gpioa.pa10), BAUD.bps(), &mut rcc)
+            .unwrap_or_else(|_| fail("USART1"));
+        let s2 = Serial::new(dp.USART2, (gpioa.pa2, gpioa.pa3), BAUD.bps(), &mut rcc)
+            .unwrap_or_else(|_| fail("USART2"));
+        let (tx1, mut rx1) = s1.split();
+        let (tx2, mut rx2) = s2.split();
+        rx1.listen();
+        rx2.listen();
+
+        let (p1, c1) = cx.local.rx1.split();
+        let (pt1, ct1) = cx.local.tx1.split();
+        let (p2, c2) = cx.local.rx2.split();
+        let (pt2, ct2) = cx.local.tx2.split();
+        // QEMU's USARTs are full duplex (no echo) and have no driver-enable pin.
+        let port1 = PortIsr::new(Rs485::full_duplex(tx1, rx1, NoDe), p1, ct1);
+        let port2 = PortIsr::new(Rs485::full_duplex(tx2, rx2, NoDe), p2, ct2);
+        let scada_port = PortTask::new(c1, pt1, QEMU_SILENCE_US, Some(request_at_end), || {
+            rtic::pend(pac::Interrupt::USART1)
+        });
+        let vfd_port = a.vfd_uart.then(|| {
+            PortTask::new(c2, pt2, QEMU_SILENCE_US, None, || {
+                rtic::pend(pac::Interrupt::USART2)
+            })
+        });
+
+        let mut syst = cx.core.SYST;
+        syst.set_clock_source(cortex_m::peripheral::syst::SystClkSource::Core);
+        syst.set_reload(QEMU_SYSTICK_HZ / WAKE_HZ - 1);
+        syst.clear_current();
+        syst.enable_interrupt();
+        syst.enable_counter();
+
+        let (scada_wake, scada_rx) = make_channel!((), 1);
+        let (vfd_tx, vfd_rx) = make_channel!(Request, REQ_CAP);
+        let (log_tx, log_rx) = make_channel!(LogMsg, LOG_CAP);
+        defmt::info!(
+            "firmware: virtual bench, SCADA unit 1 on USART1, VFD {=str}, mode={=u8} setpoint={=u16} seed={=u32} narmax={=str}{=str}",
+            if a.vfd_uart { "on USART2" } else { "virtual" },
+            a.mode as u8,
+            a.setpoint,
+            a.seed,
+            a.arithmetic.name(),
+            if a.run_ms.is_some() { "" } else { ", runs until stopped" }
+        );
+        let _ = scada::spawn();
+        let _ = vfd::spawn();
+        let _ = log::spawn();
+        (
+            Shared {
+                io,
+                commands: scada.commands(),
+                published: Published::default(),
+                vfd_status: VfdStatus::START,
+            },
+            Local {
+                core,
+                ms: firmware::MsClock::new(now_us()),
+                run_ms: a.run_ms,
+                stopped: false,
+                port1,
+                port2,
+                scada_port,
+                vfd_port,
+                scada,
+                vfd,
+                scada_wake_isr: scada_wake.clone(),
+                scada_wake,
+                scada_rx,
+                vfd_tx,
+                vfd_rx,
+                log_tx,
+                log_rx,
+            },
+        )
+    }
+
+    #[idle]
+    fn idle(_: idle::Context) -> ! {
+        loop {
+            cortex_m::asm::wfi();
+        }
+    }
+
+    /// SCADA's USART: bytes into the queue, the answer out; wakes the SCADA task.
+    #[task(binds = USART1, priority = 3, local = [port1, scada_wake_isr])]
+    fn usart1(cx: usart1::Context) {
+        let t0 = now_ns();
+        // QEMU: the transmit interrupts never fire, so a frame is written out here at once.
+        while cx.local.port1.on_interrupt(&MARGIN) {}
+        let _ = cx.local.scada_wake_isr.try_send(());
+        record_max(&MARGIN.usart_handler_max, now_ns().wrapping_sub(t0));
+    }
+
+    /// The VFD's USART (with `vfd=uart`).
+    #[task(binds = USART2, priority = 3, local = [port2])]
+    fn usart2(cx: usart2::Context) {
+        let t0 = now_ns();
+        while cx.local.port2.on_interrupt(&MARGIN) {}
+        record_max(&MARGIN.usart_handler_max, now_ns().wrapping_sub(t0));
+    }
+
+    /// Every elapsed millisecond of TIM5: one controller step, its outputs to the virtual
+    /// bench, the bench stepped; then the links are woken with what the step left them.
+    #[task(binds = SysTick, priority = 2,
+           local = [core, ms, run_ms, stopped, vfd_tx, log_tx, scada_wake],
+           shared = [io, commands, published, vfd_status])]
+    fn control(mut cx: control::Context) {
+        let t0 = now_ns();
+        let now = cx.local.ms.now_ms(now_us());
+        let core = cx.local.core;
+        while !*cx.local.stopped && now.wrapping_sub(core.now_ms()) as i32 >= 0 {
+            let commands = cx.shared.commands.lock(|c| *c);
+            let vfd = cx.shared.vfd_status.lock(|s| *s);
+            let out = cx.shared.io.lock(|io| {
+                let inputs = Virtual::inputs(core, io, commands, vfd);
+                Virtual::control(core, io, &inputs)
+            });
+            let Ok(out) = out else {
+                let _ = cx
+                    .local
+                    .log_tx
+                    .try_send(LogMsg::Error("the virtual bench diverged"));
+                let _ = cx.local.log_tx.try_send(LogMsg::Done { failed: true });
+                *cx.local.stopped = true;
+                break;
+            };
+            cx.shared.published.lock(|p| *p = out.published);
+            if cx
+                .local
+                .vfd_tx
+                .try_send(Request {
+                    t_ms: out.t_ms,
+                    torque_pct: out.requested_torque_pct,
+                })
+                .is_err()
+            {
+                let _ = cx.local.log_tx.try_send(LogMsg::Error("VFD task behind"));
+            }
+            let _ = cx.local.scada_wake.try_send(());
+            MARGIN
+                .steps
+                .fetch_add(1, core::sync::atomic::Ordering::Relaxed);
+            if let Some(line) = out.log {
+                if cx.local.log_tx.try_send(LogMsg::Line(line)).is_err() {
+                    defmt::warn!("log line dropped (log task behind)");
+                }
+            }
+            if cx.local.run_ms.is_some_and(|end| out.t_ms + 1 >= end) {
+                let _ = cx.local.log_tx.try_send(LogMsg::Done { failed: false });
+                *cx.local.stopped = true;
+            }
+        }
+        record_max(&MARGIN.control_max, now_ns().wrapping_sub(t0));
+    }
+
+    /// The SCADA server: requests from USART1's queue, answers back to it.
+    #[task(priority = 1, local = [scada, scada_port, scada_rx], shared = [commands, published])]
+    async fn scada(mut cx: scada::Context) {
+        let (mut frame, mut answer) = (Frame::new(), Frame::new());
+        while cx.local.scada_rx.recv().await.is_ok() {
+            let port = &mut *cx.local.scada_port;
+            port.now_us = now_us();
+            while port.receive_frame(&mut frame) {
+                let values = cx.shared.published.lock(|p| *p);
+                let link = &mut *cx.local.scada;
+                link.publish(&values);
+                if let Some(n) = link.handle(&frame, &mut answer) {
+                    if !port.send_frame(&answer[..n]) {
+                        defmt::warn!("SCADA answer dropped (transmit queue full)");
+                    }
+                }
+                let c = link.commands();
+                cx.shared.commands.lock(|x| *x = c);
+            }
+        }
+    }
+
+    /// The VFD master: one pass per control step, at the step's time, with its request.
+    #[task(priority = 1, local = [vfd, vfd_port, vfd_rx], shared = [io, vfd_status])]
+    async fn vfd(mut cx: vfd::Context) {
+        while let Ok(r) = cx.local.vfd_rx.recv().await {
+            let link = &mut *cx.local.vfd;
+            match cx.local.vfd_port {
+                Some(port) => {
+                    port.now_us = now_us();
+                    link.poll(r.t_ms, r.torque_pct, port);
+                }
+                None => cx.shared.io.lock(|io| link.poll(r.t_ms, r.torque_pct, io)),
+            }
+            let s = link.status();
+            cx.shared.vfd_status.lock(|x| *x = s);
+        }
+    }
+
+    /// The log: the once-a-second line, the margins, errors; the exit at the end of `run_ms`.
+    #[task(priority = 1, local = [log_rx])]
+    async fn log(cx: log::Context) {
+        while let Ok(msg) = cx.local.log_rx.recv().await {
+            match msg {
+                LogMsg::Line(line) => {
+                    let t0 = now_ns();
+                    defmt::info!("{}", line);
+                    record_max(&MARGIN.masked_max, now_ns().wrapping_sub(t0));
+                    let m = MARGIN.snapshot();
+                    defmt::info!(
+                        "margin: steps={=u32} control_max={=u32} usart_max={=u32} masked_max={=u32} rx_wait_bound={=u32} bytes={=u32} lost={=u32}",
+                        m.steps,
+                        m.control_max,
+                        m.usart_handler_max,
+                        m.masked_max,
+                        m.rx_wait_bound(),
+                        m.bytes_received,
+                        m.bytes_lost
+                    );
+                }
+                LogMsg::Error(what) => defmt::error!("{=str}", what),
+                LogMsg::Done { failed } => {
+                    let m = MARGIN.snapshot();
+                    defmt::info!(
+                        "done: steps={=u32} control_max={=u32} rx_wait_bound={=u32} lost={=u32}",
+                        m.steps,
+                        m.control_max,
+                        m.rx_wait_bound(),
+                        m.bytes_lost
+                    );
+                    debug::exit(if failed || m.bytes_lost > 0 {
+                        debug::EXIT_FAILURE
+                    } else {
+                        debug::EXIT_SUCCESS
+                    });
+                }
+            }
+        }
+    }
+}
