@@ -275,12 +275,16 @@ pub mod port {
         }
     }
 
+    /// Where a whole frame starts at the end of the bytes held, found by its content (see
+    /// [`RtuFramer::take_if`]).
+    pub type FindFrame = fn(&[u8]) -> Option<usize>;
+
     /// A port's task side: frames out of the receive queue, frames into the transmit queue.
     pub struct PortTask {
         rx: Consumer<'static, u16>,
         tx: Producer<'static, Frame>,
         framer: RtuFramer,
-        by_content: Option<fn(&[u8]) -> Option<usize>>,
+        by_content: Option<FindFrame>,
         pend: fn(),
         /// Time stamp for the bytes taken next, µs (wrapping).
         pub now_us: u32,
@@ -295,7 +299,7 @@ pub mod port {
             rx: Consumer<'static, u16>,
             tx: Producer<'static, Frame>,
             silence_us: u32,
-            by_content: Option<fn(&[u8]) -> Option<usize>>,
+            by_content: Option<FindFrame>,
             pend: fn(),
         ) -> Self {
             Self {

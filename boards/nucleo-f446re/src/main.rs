@@ -1,15 +1,30 @@
-//! NUCLEO-F446RE board glue: the real transmitters, the VFD's analog torque reference, the two
-//! RS-485 Modbus RTU links, the watchdog, the user LED and defmt logs over RTT (`probe-rs run
-//! --chip STM32F446RETx`).
+//! The bench controller on a NUCLEO-F446RE: the real transmitters, the VFD's analog torque
+//! reference, the two RS-485 Modbus RTU links, the watchdog, the user LED and defmt logs
+//! over RTT (`probe-rs run --chip STM32F446RETx`, this crate's cargo runner), as an RTIC 2
+//! application with the schedule of the `firmware` crate:
 //!
-//! Everything the loop decides lives in the `controller` crate; this module only wires the
-//! STM32F446's peripherals to [`Io`] and [`Board`].
+//! | priority | task | here |
+//! |---|---|---|
+//! | 3 | `usart1`, `usart6` (RXNE, TC) and `tim6`, `tim7` (the RTU gap) | bytes into and out of `heapless` queues |
+//! | 2 | `control` (SysTick, 1 kHz) | one [`firmware::Core`] step, ADC, DAC, watchdog, LED |
+//! | 1 | `scada`, `vfd`, `log` | the SCADA server, the VFD master, defmt lines |
+//! | idle | | `wfi` |
+//!
+//! # Serial lines
+//! Each USART interrupts on every received byte (RXNE) and, while a frame goes out, on every
+//! transmitted one (TC: the next byte is written from the handler, so consecutive bytes are
+//! apart by the handler's latency, far below the 1.5 characters the spec allows inside a
+//! frame). Every received byte restarts the port's basic timer (TIM6 for SCADA, TIM7 for the
+//! VFD) as a one-shot of 3.5 characters ([`controller::rtu::gap_us`]: 2 006 µs at 19 200 baud,
+//! 11-bit characters as the Modbus spec counts them); when it expires, the frame is complete.
+//! The driver enable (DE and /RE tied) rises with the first byte and falls once the last stop
+//! bit is out.
 //!
 //! # Clocks
-//!
 //! HSE 8 MHz in bypass mode (the ST-LINK's MCO drives OSC_IN, the board's default), PLL to a
 //! 180 MHz SYSCLK (the HAL turns the regulator's over-drive on above 168 MHz); AHB 180 MHz,
-//! APB2 90 MHz, APB1 45 MHz. SysTick, clocked from the core, makes the loop's 1 ms tick.
+//! APB2 90 MHz, APB1 45 MHz (timers 90 MHz). SysTick, from the core clock, starts the control
+//! task every 1 ms; the margins are DWT cycle counts.
 //!
 //! # Wiring
 //!
@@ -24,7 +39,7 @@
 //! | PC6  | CN10-4 (morpho only)     | VFD USART6_TX (AF8) | to DI of a second transceiver |
 //! | PC7  | CN5 D9, CN10-19          | VFD USART6_RX (AF8) | from RO; internal pull-up on |
 //! | PB0  | CN8 A3, CN7-34           | VFD RS-485 DE | DE and /RE tied; PB0 is free on the NUCLEO-F446RE (it only reaches A3 and the morpho pin) |
-//! | PA5  | CN5 D13, CN10-11         | user LED LD2 | toggled once a second: the loop is alive |
+//! | PA5  | CN5 D13, CN10-11         | user LED LD2 | toggled once a second: the control task runs |
 //! | GND  | CN6 GND, CN7-8/19/22     | common | shunts, amplifier, transceivers |
 //!
 //! Both RS-485 links: 19 200 baud, 8N1, two-wire half duplex; 120 Ω termination across A/B at
@@ -35,339 +50,525 @@
 //! Left as the board ships them: PA2/PA3 (USART2 to the ST-LINK virtual COM port), PA13/PA14
 //! (SWD), PC13 (user button), PH0/PH1 (HSE from the ST-LINK MCO).
 //!
-//! # What is not done here
-//!
-//! No interrupts besides SysTick, no DMA: the loop polls the USARTs on every pass (a character
-//! takes 521 µs at 19 200 baud, a pass far less) and never sleeps.
+//! # Faults
+//! A HardFault (a panic ends in one: panic-probe logs it, then `udf`) logs the faulting PC,
+//! switches the torque reference off (the DAC channel disabled: the amplifier's pull-down
+//! takes the VFD's input to 0 V) and resets the MCU, which starts stopped (mode 0). A control
+//! task that stops running is reset by the independent watchdog (≈ 68-190 ms).
+#![no_std]
+#![no_main]
 
-use crate::{Board, Loop};
-use controller::app::{AppConfig, Io, LogLine};
-use controller::rtu::{Frame, RtuPort, Uart};
 use defmt_rtt as _;
 use panic_probe as _;
-use stm32f4xx_hal::{
-    adc::{
-        config::{AdcConfig, Clock, SampleTime},
-        Adc,
-    },
-    dac::{DacOut, DacPin, C1},
-    gpio::{Analog, AnyPin, Output, PA0, PA1, PA5},
-    nb, pac,
-    prelude::*,
-    rcc::Config as RccConfig,
-    serial::{self, Rx, Serial, Tx},
-    watchdog::IndependentWatchdog,
-};
+use stm32f4xx_hal::pac;
 
 /// Modbus RTU line speed, bit/s (both links).
 const BAUD_BPS: u32 = 19_200;
-
-/// Silence that ends an RTU frame, ms (as `controller::rtu` asks: the next millisecond above
-/// 3.5 characters, plus one for the tick's resolution).
-///
-/// 3.5 characters at 19 200 baud 8N1 are 1.82 ms. Bytes are stamped with the whole
-/// millisecond in which the loop reads them, so a measured silence of `n` ms is a real one
-/// of more than `n - 1` ms: with 3 the frame ends after more than 2 ms of real silence,
-/// never less than the 1.82 ms the spec asks for (with 2 it could end after just over 1 ms:
-/// still longer than the 0.78 ms, 1.5 characters, allowed inside a frame, but shorter than
-/// the spec's inter-frame gap). The cost is at most 1 ms more per exchange.
-const RTU_IDLE_MS: u32 = 3;
-
-/// Watchdog timeout, ms. The IWDG runs from the LSI (17-47 kHz on the F446, 32 kHz
-/// nominal), so the real timeout is ≈ 68-190 ms; the loop feeds it every 1 ms.
+/// Core clock, Hz.
+const SYSCLK_HZ: u32 = 180_000_000;
+/// Watchdog timeout, ms. The IWDG runs from the LSI (17-47 kHz on the F446, 32 kHz nominal),
+/// so the real timeout is ≈ 68-190 ms; the control task feeds it every 1 ms.
 const WATCHDOG_MS: u32 = 100;
-
-/// LED LD2 toggles every this many loop ticks (1 ms each): once a second.
-const LED_TOGGLE_TICKS: u32 = 1000;
-
-/// ADC sampling time of each conversion: 480 ADC clocks.
-///
-/// Sampling is paced by the 1 ms SysTick loop, not by a timer trigger or DMA: the loop asks
-/// for a pressure sample every 50 ms and a flow sample every 100 ms, and the conversion runs in
-/// the tick that asks, so the sampling instant jitters by less than 1 ms, under 2 % of the
-/// 50 ms period — small against the transmitters' own response (tens of ms and more) and
-/// invisible to models identified at 50/100 ms. A conversion takes (480 + 12) ADC clocks /
-/// 22.5 MHz (ADCCLK = PCLK2 90 MHz / 4) ≈ 22 µs, busy-waited: twice per 100 ms it costs
-/// nothing, and it stays far below the 521 µs character time within which the loop must poll
-/// the USARTs. The long sampling time lets the 150 Ω source (plus a protection resistor and a
-/// filter capacitor, if fitted) settle fully.
-const SAMPLE_TIME: SampleTime = SampleTime::Cycles_480;
-
+/// LED LD2 toggles every this many control steps (1 ms each): once a second.
+const LED_TOGGLE_STEPS: u32 = 1000;
 /// Full scale of the 12-bit DAC, code.
 const DAC_FULL_SCALE: f32 = 4095.0;
+/// Silence after which a frame still held is given up, µs (the gap timer ends frames; this
+/// only clears what a lost timer event would leave behind).
+const STALE_FRAME_US: u32 = 20_000;
 
-/// One USART behind an RS-485 transceiver whose DE and /RE are tied to one GPIO, polled
-/// (no interrupt, no DMA).
-pub struct Rs485<U: serial::Instance> {
-    /// Transmit half of the USART.
-    tx: Tx<U>,
-    /// Receive half of the USART.
-    rx: Rx<U>,
-    /// Driver enable (DE and /RE tied): high while sending.
-    de: AnyPin<Output>,
-    /// Bytes dropped for a parity, framing, noise or overrun error since start (count).
-    rx_errors: u32,
+/// Microseconds from TIM5 running free at 1 MHz (32 bits, wraps every 71 min).
+fn now_us() -> u32 {
+    // SAFETY: a read of a free-running counter register; TIM5 is set up once in `init` and
+    // never written again.
+    unsafe { (*pac::TIM5::ptr()).cnt().read().bits() }
 }
 
-impl<U: serial::Instance> Rs485<U> {
-    /// The port on `serial` with the driver enable `de` (driven low: receiving).
-    pub fn new(serial: Serial<U>, mut de: AnyPin<Output>) -> Self {
-        de.set_low();
-        let (tx, rx) = serial.split();
-        Self {
-            tx,
-            rx,
-            de,
-            rx_errors: 0,
-        }
-    }
-
-    /// Bytes dropped for a line error since start (count); a few after connecting a cable are
-    /// normal, a steady rise means noise, a missing termination or a wrong baud rate.
-    pub fn rx_errors(&self) -> u32 {
-        self.rx_errors
-    }
+/// The cycle counter (DWT CYCCNT, 180 MHz): the margins' unit.
+fn cycles() -> u32 {
+    cortex_m::peripheral::DWT::cycle_count()
 }
 
-impl<U: serial::Instance> Uart for Rs485<U> {
-    /// The received byte, if RXNE; a byte with a line error is dropped (the HAL has already
-    /// cleared the error by reading DR) and counted; the frame's CRC then fails upstream.
-    fn try_read(&mut self) -> Option<u8> {
-        match self.rx.read() {
-            Ok(byte) => Some(byte),
-            Err(nb::Error::WouldBlock) => None,
-            Err(nb::Error::Other(_)) => {
-                self.rx_errors = self.rx_errors.wrapping_add(1);
-                None
-            }
-        }
-    }
+// HardFault: a stack overflow (flip-link puts the stack below .data/.bss) leaves SP below
+// RAM, and the handler's first push would fault again (lockup): move SP back to the top first.
+core::arch::global_asm!(
+    ".section .HardFaultTrampoline, \"ax\"",
+    ".global HardFault",
+    ".type HardFault,%function",
+    ".thumb_func",
+    "HardFault:",
+    "  mrs r0, MSP",
+    "  ldr r1, =_stack_end",
+    "  cmp r0, r1",
+    "  bhs 1f",
+    "  ldr r1, =_stack_start",
+    "  msr MSP, r1",
+    "  movs r0, #0",
+    "1:",
+    "  b {handler}",
+    ".ltorg",
+    handler = sym hard_fault,
+);
 
-    /// Writes `byte` to DR if TXE (the transmit buffer is free); `false` otherwise.
-    fn try_write(&mut self, byte: u8) -> bool {
-        self.tx.write(byte).is_ok()
-    }
-
-    /// `true` once the last stop bit has left the shift register (TC): only then may the
-    /// driver be released.
-    fn tx_complete(&mut self) -> bool {
-        self.tx.flush().is_ok()
-    }
-
-    /// DE (and /RE) high while sending, low while listening.
-    fn set_driver(&mut self, on: bool) {
-        if on {
-            self.de.set_high();
-        } else {
-            self.de.set_low();
-        }
-    }
-}
-
-/// The SCADA link: USART1 (PA9/PA10), DE on PA8.
-pub type ScadaUart = Rs485<pac::USART1>;
-/// The VFD link: USART6 (PC6/PC7), DE on PB0.
-pub type VfdUart = Rs485<pac::USART6>;
-
-/// The NUCLEO-F446RE as the loop's [`Io`] and [`Board`].
-pub struct NucleoBoard {
-    /// Modbus RTU master port to the VFD (USART6), frames ended by [`RTU_IDLE_MS`] of silence.
-    vfd: RtuPort<VfdUart>,
-    /// ADC1, one blocking conversion per request (see [`SAMPLE_TIME`]).
-    adc: Adc<pac::ADC1>,
-    /// Pressure transmitter shunt, A0.
-    pressure_pin: PA0<Analog>,
-    /// Flow transmitter shunt, A1.
-    flow_pin: PA1<Analog>,
-    /// DAC channel 1 (PA4), output buffer off: 0-3.3 V torque reference before the ×3.03
-    /// amplifier.
-    dac: C1,
-    /// Independent watchdog, fed after every tick.
-    watchdog: IndependentWatchdog,
-    /// User LED LD2.
-    led: PA5<Output>,
-    /// Ticks since the LED last toggled (count, 0..[`LED_TOGGLE_TICKS`]).
-    led_ticks: u32,
-}
-
-impl Io for NucleoBoard {
-    /// ADC code of the pressure shunt (0..=4095; 4 mA ≈ 745, 20 mA ≈ 3723), one blocking
-    /// conversion ([`SAMPLE_TIME`]).
-    fn pressure_code(&mut self) -> u16 {
-        self.adc.convert(&self.pressure_pin, SAMPLE_TIME)
-    }
-
-    /// ADC code of the flow shunt (0..=4095), one blocking conversion ([`SAMPLE_TIME`]).
-    fn flow_code(&mut self) -> u16 {
-        self.adc.convert(&self.flow_pin, SAMPLE_TIME)
-    }
-
-    /// Torque reference `pct` % (0..=100) as a DAC code, rounded: 0 % → 0 V, 100 % → 3.3 V
-    /// at PA4, ×3.03 → 0-10 V at the VFD. Out-of-range values are clamped, NaN gives 0.
-    fn set_torque_ref(&mut self, pct: f32) {
-        let code = (pct.clamp(0.0, 100.0) / 100.0 * DAC_FULL_SCALE + 0.5) as u16;
-        self.dac.set_value(code);
-    }
-
-    /// Starts sending `frame` to the VFD (the bytes go out as [`Board::poll`] runs).
-    fn vfd_send(&mut self, frame: &[u8]) {
-        self.vfd.send(frame);
-    }
-
-    /// A complete frame from the VFD, if the line has been silent for [`RTU_IDLE_MS`].
-    fn vfd_receive(&mut self, now_ms: u32, frame: &mut Frame) -> bool {
-        self.vfd.receive(now_ms, frame)
-    }
-}
-
-impl Board for NucleoBoard {
-    /// SysTick interrupts counted (none is lost on silicon: nothing masks them for 1 ms).
-    fn now_ms(&mut self) -> u32 {
-        crate::now_ms()
-    }
-
-    /// Moves the VFD port's bytes.
-    fn poll(&mut self, now_ms: u32) {
-        self.vfd.poll(now_ms);
-    }
-
-    /// Feeds the watchdog, blinks LD2, logs the once-a-second line over RTT; always `true`.
-    fn after_tick(&mut self, log: Option<&LogLine>) -> bool {
-        self.watchdog.feed();
-        self.led_ticks += 1;
-        if self.led_ticks >= LED_TOGGLE_TICKS {
-            self.led_ticks = 0;
-            self.led.toggle();
-        }
-        if let Some(log) = log {
-            let v = &log.values;
-            defmt::info!(
-                "t_ms={=u32} mode={=u8} narmax={=u8} u_pct={=f32} p_mca={=f32} q_lps={=f32} wb_rpm={=f32} wb_p_mca={=f32} wb_q_lps={=f32} nx_p_mca={=f32} nx_q_lps={=f32} res_wb_p={=f32} res_wb_q={=f32} res_nx_p={=f32} res_nx_q={=f32} vfd_rpm={=f32} vfd_torque_pct={=f32} status={=u16:#x} vfd_rx_errors={=u32}",
-                log.t_ms,
-                log.mode as u8,
-                log.arithmetic as u8,
-                v.torque_pct,
-                v.pressure_mca,
-                v.flow_lps,
-                v.whitebox_speed_rpm,
-                v.whitebox_pressure_mca,
-                v.whitebox_flow_lps,
-                v.narmax_pressure_mca,
-                v.narmax_flow_lps,
-                v.whitebox_pressure_residual_mca,
-                v.whitebox_flow_residual_lps,
-                v.narmax_pressure_residual_mca,
-                v.narmax_flow_residual_lps,
-                v.vfd_speed_rpm,
-                v.vfd_torque_pct,
-                v.status.bits(),
-                self.vfd.uart().rx_errors()
-            );
-        }
-        true
-    }
-
-    /// Nothing: the loop must poll the USARTs at least once per character time (521 µs), so
-    /// it never sleeps (no WFI).
-    fn idle(&mut self) {}
-}
-
-/// Sets up the board and runs the loop forever.
+/// Logs the fault, takes the torque reference to 0 V and resets the MCU.
 ///
-/// Order: clocks, SysTick, GPIO, ADC, DAC (at 0 %), both RS-485 ports, the loop (models
-/// checked and quantised), and only then the watchdog, so that a slow start-up cannot reset
-/// the board in a loop.
-pub fn run() -> ! {
-    let dp = pac::Peripherals::take().expect("device peripherals taken once");
-    let cp = cortex_m::Peripherals::take().expect("core peripherals taken once");
-
-    let mut rcc = dp.RCC.freeze(
-        RccConfig::hse(8.MHz())
-            .bypass_hse_oscillator()
-            .sysclk(180.MHz()),
-    );
-    crate::start_systick(cp.SYST, rcc.clocks.sysclk().raw());
-
-    let gpioa = dp.GPIOA.split(&mut rcc);
-    let gpiob = dp.GPIOB.split(&mut rcc);
-    let gpioc = dp.GPIOC.split(&mut rcc);
-
-    let adc = Adc::new(
-        dp.ADC1,
-        true,
-        AdcConfig::default().clock(Clock::Pclk2_div_4),
-        &mut rcc,
-    );
-
-    let mut dac = dp.DAC.constrain(gpioa.pa4.into_analog(), &mut rcc);
-    // Output buffer off (BOFF1): the buffered output only spans 0.2 V..VDDA - 0.2 V, so 0 %
-    // would reach the VFD as ≈ 0.6 V (≈ 6 % torque) and 100 % as ≈ 9.4 V; unbuffered it spans
-    // 0..VDDA, which the ×3.03 amplifier's high-impedance input can take.
-    // SAFETY: one read-modify-write of DAC_CR during single-threaded start-up, before the
-    // channel is enabled; no interrupt touches the DAC, and the HAL's `C1` writes the same
-    // register the same way (through the same pointer).
-    unsafe { (*pac::DAC::ptr()).cr().modify(|_, w| w.boff1().set_bit()) };
-    dac.set_value(0);
-    dac.enable();
-
-    let scada_serial: Serial<pac::USART1> = Serial::new(
-        dp.USART1,
-        (
-            gpioa.pa9.into_alternate::<7>(),
-            gpioa.pa10.into_alternate::<7>().internal_pull_up(true),
+/// # Safety
+/// Called only by the `HardFault` trampoline, with the exception frame (or null after a stack
+/// overflow).
+unsafe extern "C" fn hard_fault(ef: *const cortex_m_rt::ExceptionFrame) -> ! {
+    // SAFETY: the DAC's control and data registers, written once with every task stopped
+    // (a HardFault preempts them all): channel 1 off, its code 0.
+    unsafe {
+        let dac = &*pac::DAC::ptr();
+        dac.dhr12r1().write(|w| w.daccdhr().set(0));
+        dac.cr().modify(|_, w| w.en1().clear_bit());
+    }
+    // SAFETY: the trampoline passes the stacked frame, or null.
+    match unsafe { ef.as_ref() } {
+        Some(ef) => defmt::error!(
+            "HardFault at pc={=u32:#010x} lr={=u32:#010x}: torque reference off, reset",
+            ef.pc(),
+            ef.lr()
         ),
-        serial::Config::default().baudrate(BAUD_BPS.bps()),
-        &mut rcc,
-    )
-    .unwrap_or_else(|_| panic!("USART1 configuration"));
-    let scada_uart: ScadaUart = Rs485::new(scada_serial, gpioa.pa8.into_push_pull_output().erase());
-    let mut scada_port = RtuPort::new(scada_uart, RTU_IDLE_MS);
+        None => defmt::error!("HardFault: stack overflow; torque reference off, reset"),
+    }
+    cortex_m::peripheral::SCB::sys_reset()
+}
 
-    let vfd_serial: Serial<pac::USART6> = dp
-        .USART6
-        .serial(
+/// The timing margins (DWT cycles at 180 MHz).
+static MARGIN: firmware::Margin = firmware::Margin::new();
+
+/// What the control task asks of the VFD task after a step.
+#[derive(Clone, Copy)]
+struct Request {
+    t_ms: u32,
+    torque_pct: f32,
+}
+
+#[rtic::app(device = stm32f4xx_hal::pac, peripherals = true, dispatchers = [EXTI0, EXTI1, EXTI2])]
+mod app {
+    use super::*;
+    use controller::control::{Commands, Config, Inputs, LogLine, VfdStatus};
+    use controller::link::{ScadaLink, VfdLink};
+    use controller::modbus::Frame;
+    use controller::rtu::{gap_us, Rs485};
+    use controller::scada::Published;
+    use firmware::port::{PortIsr, PortTask, RX_QUEUE, TX_QUEUE};
+    use firmware::{record_max, Core};
+    use heapless::spsc::Queue;
+    use rtic_sync::channel::{Receiver, Sender};
+    use rtic_sync::make_channel;
+    use stm32f4xx_hal::{
+        adc::{
+            config::{AdcConfig, Clock, SampleTime},
+            Adc,
+        },
+        dac::{DacOut, DacPin, C1},
+        gpio::{Analog, Output, PushPull, PA0, PA1, PA5, PA8, PB0},
+        prelude::*,
+        rcc::Config as RccConfig,
+        serial::{self, Rx, Serial, Tx},
+        timer::{CounterUs, Event, Flag},
+        watchdog::IndependentWatchdog,
+    };
+
+    /// ADC sampling time of each conversion: 480 ADC clocks, (480 + 12) / 22.5 MHz ≈ 22 µs,
+    /// busy-waited in the control task when a sample is due (twice per 100 ms); the long
+    /// sampling lets the 150 Ω source (and a protection resistor and filter capacitor, if
+    /// fitted) settle fully. The sampling instant is the control step's, within its jitter.
+    const SAMPLE_TIME: SampleTime = SampleTime::Cycles_480;
+    const LOG_CAP: usize = 4;
+    const REQ_CAP: usize = 4;
+
+    type ScadaIsr = PortIsr<Tx<pac::USART1>, Rx<pac::USART1>, PA8<Output<PushPull>>>;
+    type VfdIsr = PortIsr<Tx<pac::USART6>, Rx<pac::USART6>, PB0<Output<PushPull>>>;
+
+    /// A port's interrupt side and its gap timer, shared by the USART's and the timer's
+    /// handlers (both priority 3: the lock costs nothing).
+    pub struct Line<P> {
+        port: P,
+        gap: CounterUs<pac::TIM6>,
+    }
+    /// As [`Line`], with TIM7.
+    pub struct Line7<P> {
+        port: P,
+        gap: CounterUs<pac::TIM7>,
+    }
+
+    #[shared]
+    struct Shared {
+        scada_line: Line<ScadaIsr>,
+        vfd_line: Line7<VfdIsr>,
+        commands: Commands,
+        published: Published,
+        vfd_status: VfdStatus,
+    }
+
+    #[local]
+    struct Local {
+        core: Core,
+        adc: Adc<pac::ADC1>,
+        pressure_pin: PA0<Analog>,
+        flow_pin: PA1<Analog>,
+        dac: C1,
+        watchdog: IndependentWatchdog,
+        led: PA5<Output<PushPull>>,
+        scada_port: PortTask,
+        vfd_port: PortTask,
+        scada: ScadaLink,
+        vfd: VfdLink,
+        scada_wake: Sender<'static, (), 1>,
+        scada_wake_gap: Sender<'static, (), 1>,
+        scada_rx: Receiver<'static, (), 1>,
+        vfd_tx: Sender<'static, Request, REQ_CAP>,
+        vfd_rx: Receiver<'static, Request, REQ_CAP>,
+        log_tx: Sender<'static, LogLine, LOG_CAP>,
+        log_rx: Receiver<'static, LogLine, LOG_CAP>,
+    }
+
+    #[init(local = [
+        rx1: Queue<u16, RX_QUEUE> = Queue::new(),
+        tx1: Queue<Frame, TX_QUEUE> = Queue::new(),
+        rx6: Queue<u16, RX_QUEUE> = Queue::new(),
+        tx6: Queue<Frame, TX_QUEUE> = Queue::new(),
+    ])]
+    fn init(cx: init::Context) -> (Shared, Local) {
+        let dp = cx.device;
+        let mut cp = cx.core;
+        let config = Config::bench();
+        // A configuration the controller refuses is a build-time mistake: panic-probe logs
+        // it and the HardFault handler resets with the torque reference off.
+        let core = firmware::build_core(&config).unwrap_or_else(|_| panic!("controller"));
+        let scada = ScadaLink::new(&config).unwrap_or_else(|_| panic!("SCADA"));
+        let vfd = VfdLink::new(config.vfd).unwrap_or_else(|_| panic!("VFD map"));
+
+        let mut rcc = dp.RCC.freeze(
+            RccConfig::hse(8.MHz())
+                .bypass_hse_oscillator()
+                .sysclk(SYSCLK_HZ.Hz()),
+        );
+        // TIM5 free-running at 1 MHz from the 90 MHz timer clock (APB1 × 2): the links' µs.
+        // SAFETY: RCC's APB1 enable register, read-modify-written once before any task runs.
+        unsafe {
+            (*pac::RCC::ptr())
+                .apb1enr()
+                .modify(|_, w| w.tim5en().set_bit())
+        };
+        dp.TIM5.psc().write(|w| w.psc().set(89));
+        dp.TIM5.arr().write(|w| w.arr().set(u32::MAX));
+        dp.TIM5.egr().write(|w| w.ug().set_bit());
+        dp.TIM5.cr1().modify(|_, w| w.cen().set_bit());
+        cp.DCB.enable_trace();
+        cp.DWT.enable_cycle_counter();
+
+        let gpioa = dp.GPIOA.split(&mut rcc);
+        let gpiob = dp.GPIOB.split(&mut rcc);
+        let gpioc = dp.GPIOC.split(&mut rcc);
+
+        // The torque reference first, at 0 V.
+        let mut dac = dp.DAC.constrain(gpioa.pa4.into_analog(), &mut rcc);
+        // Output buffer off (BOFF1): the buffered output only spans 0.2 V..VDDA - 0.2 V, so
+        // 0 % would reach the VFD as ≈ 0.6 V (≈ 6 % torque) and 100 % as ≈ 9.4 V.
+        // SAFETY: one read-modify-write of DAC_CR during start-up, before the channel is
+        // enabled and before any task runs; the HAL's `C1` writes the same register.
+        unsafe { (*pac::DAC::ptr()).cr().modify(|_, w| w.boff1().set_bit()) };
+        dac.set_value(0);
+        dac.enable();
+
+        let adc = Adc::new(
+            dp.ADC1,
+            true,
+            AdcConfig::default().clock(Clock::Pclk2_div_4),
+            &mut rcc,
+        );
+
+        let mut s1: Serial<pac::USART1> = Serial::new(
+            dp.USART1,
+            (
+                gpioa.pa9.into_alternate::<7>(),
+                gpioa.pa10.into_alternate::<7>().internal_pull_up(true),
+            ),
+            serial::Config::default().baudrate(BAUD_BPS.bps()),
+            &mut rcc,
+        )
+        .unwrap_or_else(|_| panic!("USART1"));
+        let mut s6: Serial<pac::USART6> = Serial::new(
+            dp.USART6,
             (
                 gpioc.pc6.into_alternate::<8>(),
                 gpioc.pc7.into_alternate::<8>().internal_pull_up(true),
             ),
-            BAUD_BPS.bps(),
+            serial::Config::default().baudrate(BAUD_BPS.bps()),
             &mut rcc,
         )
-        .unwrap_or_else(|_| panic!("USART6 configuration"));
-    let vfd_uart: VfdUart = Rs485::new(vfd_serial, gpiob.pb0.into_push_pull_output().erase());
+        .unwrap_or_else(|_| panic!("USART6"));
+        s1.listen(serial::Event::RxNotEmpty);
+        s6.listen(serial::Event::RxNotEmpty);
+        let (tx1, rx1) = s1.split();
+        let (tx6, rx6) = s6.split();
 
-    let mut app: Loop = match crate::build_loop(AppConfig::bench()) {
-        Ok(app) => app,
-        Err(e) => {
-            defmt::error!("cannot build the loop: {}", defmt::Display2Format(&e));
-            panic!("cannot build the loop");
+        let (p1, c1) = cx.local.rx1.split();
+        let (pt1, ct1) = cx.local.tx1.split();
+        let (p6, c6) = cx.local.rx6.split();
+        let (pt6, ct6) = cx.local.tx6.split();
+        // DE and /RE tied: the transceiver hears its own transmission (dropped as the echo).
+        let scada_isr = PortIsr::new(
+            Rs485::half_duplex(tx1, rx1, gpioa.pa8.into_push_pull_output()),
+            p1,
+            ct1,
+        );
+        let vfd_isr = PortIsr::new(
+            Rs485::half_duplex(tx6, rx6, gpiob.pb0.into_push_pull_output()),
+            p6,
+            ct6,
+        );
+        let mut gap1 = dp.TIM6.counter_us(&mut rcc);
+        let mut gap7 = dp.TIM7.counter_us(&mut rcc);
+        gap1.listen(Event::Update);
+        gap7.listen(Event::Update);
+        let scada_port = PortTask::new(c1, pt1, STALE_FRAME_US, None, || {
+            rtic::pend(pac::Interrupt::USART1)
+        });
+        let vfd_port = PortTask::new(c6, pt6, STALE_FRAME_US, None, || {
+            rtic::pend(pac::Interrupt::USART6)
+        });
+
+        let mut syst = cp.SYST;
+        syst.set_clock_source(cortex_m::peripheral::syst::SystClkSource::Core);
+        syst.set_reload(SYSCLK_HZ / 1000 - 1);
+        syst.clear_current();
+        syst.enable_interrupt();
+        syst.enable_counter();
+
+        let (scada_wake, scada_rx) = make_channel!((), 1);
+        let (vfd_tx, vfd_rx) = make_channel!(Request, REQ_CAP);
+        let (log_tx, log_rx) = make_channel!(LogLine, LOG_CAP);
+
+        // The watchdog last, so that a slow start-up cannot reset the board in a loop;
+        // frozen while a debugger halts the core.
+        let mut watchdog = IndependentWatchdog::new(dp.IWDG);
+        watchdog.stop_on_debug(&dp.DBGMCU, true);
+        watchdog.start(WATCHDOG_MS.millis());
+
+        defmt::info!(
+            "NUCLEO-F446RE bench controller: sysclk {=u32} Hz, RTU {=u32} baud, gap {=u32} µs",
+            rcc.clocks.sysclk().raw(),
+            BAUD_BPS,
+            gap_us(BAUD_BPS)
+        );
+        let _ = scada::spawn();
+        let _ = vfd::spawn();
+        let _ = log::spawn();
+        (
+            Shared {
+                scada_line: Line {
+                    port: scada_isr,
+                    gap: gap1,
+                },
+                vfd_line: Line7 {
+                    port: vfd_isr,
+                    gap: gap7,
+                },
+                commands: scada.commands(),
+                published: Published::default(),
+                vfd_status: VfdStatus::START,
+            },
+            Local {
+                core,
+                adc,
+                pressure_pin: gpioa.pa0.into_analog(),
+                flow_pin: gpioa.pa1.into_analog(),
+                dac,
+                watchdog,
+                led: gpioa.pa5.into_push_pull_output(),
+                scada_port,
+                vfd_port,
+                scada,
+                vfd,
+                scada_wake_gap: scada_wake.clone(),
+                scada_wake,
+                scada_rx,
+                vfd_tx,
+                vfd_rx,
+                log_tx,
+                log_rx,
+            },
+        )
+    }
+
+    #[idle]
+    fn idle(_: idle::Context) -> ! {
+        loop {
+            cortex_m::asm::wfi();
         }
-    };
+    }
 
-    let mut watchdog = IndependentWatchdog::new(dp.IWDG);
-    // Freeze the watchdog while a debugger halts the core (probe-rs breakpoints).
-    watchdog.stop_on_debug(&dp.DBGMCU, true);
-    watchdog.start(WATCHDOG_MS.millis());
+    /// Turns the transmission-complete interrupt of a USART on while it sends.
+    macro_rules! tc_interrupt {
+        ($usart:ty, $on:expr) => {
+            // SAFETY: one read-modify-write of CR1's TCIE bit from the port's own priority-3
+            // handlers, which never preempt each other; the HAL's halves only touch CR1 at
+            // start-up.
+            unsafe { (*<$usart>::ptr()).cr1().modify(|_, w| w.tcie().bit($on)) }
+        };
+    }
 
-    let mut board = NucleoBoard {
-        vfd: RtuPort::new(vfd_uart, RTU_IDLE_MS),
-        adc,
-        pressure_pin: gpioa.pa0.into_analog(),
-        flow_pin: gpioa.pa1.into_analog(),
-        dac,
-        watchdog,
-        led: gpioa.pa5.into_push_pull_output(),
-        led_ticks: 0,
-    };
+    /// SCADA's USART: received bytes into the queue (each restarts the gap timer), the answer
+    /// out byte by byte on TC.
+    #[task(binds = USART1, priority = 3, shared = [scada_line])]
+    fn usart1(mut cx: usart1::Context) {
+        let t0 = cycles();
+        cx.shared.scada_line.lock(|l| {
+            let before = MARGIN
+                .bytes_received
+                .load(core::sync::atomic::Ordering::Relaxed);
+            let sending = l.port.on_interrupt(&MARGIN);
+            if MARGIN
+                .bytes_received
+                .load(core::sync::atomic::Ordering::Relaxed)
+                != before
+            {
+                let _ = l.gap.start(gap_us(BAUD_BPS).micros());
+            }
+            tc_interrupt!(pac::USART1, sending);
+        });
+        record_max(&MARGIN.usart_handler_max, cycles().wrapping_sub(t0));
+    }
 
-    defmt::info!(
-        "NUCLEO-F446RE bench controller: sysclk {=u32} Hz, RTU {=u32} baud",
-        rcc.clocks.sysclk().raw(),
-        BAUD_BPS
-    );
-    crate::serve(&mut app, &mut scada_port, &mut board);
-    // `serve` never returns on this board; if it did, the unfed watchdog resets the MCU.
-    loop {
-        cortex_m::asm::nop();
+    /// SCADA's line has been silent for 3.5 characters: the frame is complete.
+    #[task(binds = TIM6_DAC, priority = 3, shared = [scada_line], local = [scada_wake_gap])]
+    fn tim6(mut cx: tim6::Context) {
+        cx.shared.scada_line.lock(|l| {
+            l.gap.clear_flags(Flag::Update);
+            let _ = l.gap.cancel();
+            l.port.mark_gap(&MARGIN);
+        });
+        let _ = cx.local.scada_wake_gap.try_send(());
+    }
+
+    /// The VFD's USART, as USART1.
+    #[task(binds = USART6, priority = 3, shared = [vfd_line])]
+    fn usart6(mut cx: usart6::Context) {
+        let t0 = cycles();
+        cx.shared.vfd_line.lock(|l| {
+            let before = MARGIN
+                .bytes_received
+                .load(core::sync::atomic::Ordering::Relaxed);
+            let sending = l.port.on_interrupt(&MARGIN);
+            if MARGIN
+                .bytes_received
+                .load(core::sync::atomic::Ordering::Relaxed)
+                != before
+            {
+                let _ = l.gap.start(gap_us(BAUD_BPS).micros());
+            }
+            tc_interrupt!(pac::USART6, sending);
+        });
+        record_max(&MARGIN.usart_handler_max, cycles().wrapping_sub(t0));
+    }
+
+    /// The VFD's line has been silent for 3.5 characters.
+    #[task(binds = TIM7, priority = 3, shared = [vfd_line])]
+    fn tim7(mut cx: tim7::Context) {
+        cx.shared.vfd_line.lock(|l| {
+            l.gap.clear_flags(Flag::Update);
+            let _ = l.gap.cancel();
+            l.port.mark_gap(&MARGIN);
+        });
+    }
+
+    /// Every 1 ms: the due ADC conversions, one controller step, the torque reference to the
+    /// DAC, the watchdog fed; then the links are woken with what the step left them.
+    #[task(binds = SysTick, priority = 2,
+           local = [core, adc, pressure_pin, flow_pin, dac, watchdog, led, vfd_tx, log_tx,
+                    scada_wake, steps: u32 = 0],
+           shared = [commands, published, vfd_status])]
+    fn control(mut cx: control::Context) {
+        let t0 = cycles();
+        let l = cx.local;
+        let (p_due, q_due) = l.core.samples_due();
+        let inputs = Inputs {
+            pressure_code: if p_due {
+                l.adc.convert(l.pressure_pin, SAMPLE_TIME)
+            } else {
+                0
+            },
+            flow_code: if q_due {
+                l.adc.convert(l.flow_pin, SAMPLE_TIME)
+            } else {
+                0
+            },
+            commands: cx.shared.commands.lock(|c| *c),
+            vfd: cx.shared.vfd_status.lock(|s| *s),
+        };
+        let out = l.core.step(&inputs);
+        // 0 % → 0 V, 100 % → 3.3 V at PA4 (×3.03 → 0-10 V at the VFD); clamped, NaN → 0.
+        let code = (out.torque_ref_pct.clamp(0.0, 100.0) / 100.0 * DAC_FULL_SCALE + 0.5) as u16;
+        l.dac.set_value(code);
+        l.watchdog.feed();
+        *l.steps = l.steps.wrapping_add(1);
+        if l.steps.is_multiple_of(LED_TOGGLE_STEPS) {
+            l.led.toggle();
+        }
+        cx.shared.published.lock(|p| *p = out.published);
+        let _ = l.vfd_tx.try_send(Request {
+            t_ms: out.t_ms,
+            torque_pct: out.requested_torque_pct,
+        });
+        let _ = l.scada_wake.try_send(());
+        if let Some(line) = out.log {
+            let _ = l.log_tx.try_send(line);
+        }
+        MARGIN
+            .steps
+            .fetch_add(1, core::sync::atomic::Ordering::Relaxed);
+        record_max(&MARGIN.control_max, cycles().wrapping_sub(t0));
+    }
+
+    /// The SCADA server.
+    #[task(priority = 1, local = [scada, scada_port, scada_rx], shared = [commands, published])]
+    async fn scada(mut cx: scada::Context) {
+        let (mut frame, mut answer) = (Frame::new(), Frame::new());
+        while cx.local.scada_rx.recv().await.is_ok() {
+            let port = &mut *cx.local.scada_port;
+            port.now_us = now_us();
+            while port.receive_frame(&mut frame) {
+                let values = cx.shared.published.lock(|p| *p);
+                let link = &mut *cx.local.scada;
+                link.publish(&values);
+                if let Some(n) = link.handle(&frame, &mut answer) {
+                    if !port.send_frame(&answer[..n]) {
+                        defmt::warn!("SCADA answer dropped (transmit queue full)");
+                    }
+                }
+                let c = link.commands();
+                cx.shared.commands.lock(|x| *x = c);
+            }
+        }
+    }
+
+    /// The VFD master: one pass per control step, at the step's time.
+    #[task(priority = 1, local = [vfd, vfd_port, vfd_rx], shared = [vfd_status])]
+    async fn vfd(mut cx: vfd::Context) {
+        while let Ok(r) = cx.local.vfd_rx.recv().await {
+            let port = &mut *cx.local.vfd_port;
+            port.now_us = now_us();
+            let link = &mut *cx.local.vfd;
+            link.poll(r.t_ms, r.torque_pct, port);
+            let s = link.status();
+            cx.shared.vfd_status.lock(|x| *x = s);
+        }
+    }
+
+    /// The once-a-second line and the margins, over RTT.
+    #[task(priority = 1, local = [log_rx])]
+    async fn log(cx: log::Context) {
+        while let Ok(line) = cx.local.log_rx.recv().await {
+            let t0 = cycles();
+            defmt::info!("{}", line);
+            record_max(&MARGIN.masked_max, cycles().wrapping_sub(t0));
+            let m = MARGIN.snapshot();
+            defmt::info!("margin (cycles at 180 MHz): {}", m);
+        }
     }
 }
