@@ -28,6 +28,8 @@ use std::process::{Command, ExitCode, Stdio};
 use std::time::Instant;
 
 const TARGET: &str = "thumbv7em-none-eabihf";
+/// Length of the SCADA flood that measures the margins, s.
+const FLOOD_S: u64 = 10;
 /// Longest a QEMU smoke run may take, s.
 const QEMU_TIMEOUT_S: u32 = 120;
 
@@ -219,8 +221,19 @@ fn qemu_output(elf: &Path, args: &[String]) -> Result<String> {
 }
 
 /// Runs a board's image in QEMU to its end as [`qemu_output`] does, its serial ports
-/// unconnected; returns its defmt log, decoded.
+/// unconnected; returns its defmt log, decoded (an error if it exits non-zero).
 fn qemu_log(elf: &Path, args: &[String]) -> Result<String> {
+    let (ok, text) = qemu_log_status(elf, args)?;
+    if ok {
+        Ok(text)
+    } else {
+        let name = elf.file_name().unwrap_or_default().to_string_lossy();
+        Err(format!("{name} in QEMU exited non-zero:\n{text}"))
+    }
+}
+
+/// As [`qemu_log`], with whether the image exited 0.
+fn qemu_log_status(elf: &Path, args: &[String]) -> Result<(bool, String)> {
     let start = Instant::now();
     let mut cmd = qemu_command(elf, args);
     cmd.args(["-display", "none", "-monitor", "none", "-serial", "null"])
@@ -243,13 +256,54 @@ fn qemu_log(elf: &Path, args: &[String]) -> Result<String> {
         start.elapsed().as_secs_f64(),
         out.status
     );
-    if !out.status.success() {
-        return Err(format!(
-            "{name} in QEMU exited with {}:\n{text}",
-            out.status
+    Ok((out.status.success(), text))
+}
+
+/// The on-target checks (`boards/qemu`'s `selftest`) in QEMU: their digests must equal the
+/// host's of the same functions, bit for bit, every check must pass, and a fault must be
+/// reported and end the run with status 1.
+fn selftest() -> Result<String> {
+    let elf = target_dir().join(TARGET).join("firmware").join("selftest");
+    let log = qemu_log(&elf, &[])?;
+    let mut report = String::new();
+    for (name, host) in firmware::selftest::digests() {
+        let line = log
+            .lines()
+            .find_map(|l| l.strip_prefix(&format!("digest {name}=")))
+            .ok_or_else(|| format!("selftest: no digest of {name}:\n{log}"))?;
+        let target = u32::from_str_radix(line.trim_start_matches("0x"), 16)
+            .map_err(|_| format!("selftest: bad digest line for {name}: {line}"))?;
+        if target != host {
+            return Err(format!(
+                "selftest: {name} differs on the target: {target:#010x}, host {host:#010x}"
+            ));
+        }
+        report.push_str(&format!(
+            "on target: {name} bits equal the host's ({host:#010x})\n"
         ));
     }
-    Ok(text)
+    let summary = log
+        .lines()
+        .find(|l| l.starts_with("selftest:"))
+        .ok_or_else(|| format!("selftest: no summary line:\n{log}"))?;
+    if !summary.ends_with(" 0 failed") {
+        return Err(format!("selftest: {summary}\n{log}"));
+    }
+    for l in log
+        .lines()
+        .filter(|l| l.starts_with("check ") || l.starts_with("tanh_q15"))
+    {
+        report.push_str(&format!("on target: {l}\n"));
+    }
+    let (ok, fault) = qemu_log_status(&elf, &["fault".into()])?;
+    if ok || !fault.contains("ERROR: HardFault at pc=") {
+        return Err(format!(
+            "selftest fault: expected the HardFault report and exit status 1, got exit {}:\n{fault}",
+            if ok { 0 } else { 1 }
+        ));
+    }
+    report.push_str("on target: a bus fault is reported (HardFault at pc=…) and QEMU exits 1\n");
+    Ok(report)
 }
 
 fn field<'a>(line: &'a str, key: &str) -> Result<&'a str> {
@@ -446,7 +500,7 @@ fn qemu(args: &[String]) -> Result {
                 Err(format!("qemu: {status}"))
             };
         }
-        let (mut qemu, bridge, _) = e2e::start_pty(&elf, cmd, true)?;
+        let (mut qemu, bridge, _, _) = e2e::start_pty(&elf, cmd, true)?;
         let pty = bridge.path.clone();
         eprintln!(
             "SCADA slave (unit 1, RTU 19200 8N1) on {pty}; e.g.\n  mbpoll -m rtu -b 19200 -P none -a 1 -t 3 -r 1 -c 18 {pty}\n  mbpoll -m rtu -b 19200 -P none -a 1 -t 4 -r 1 -1 {pty} 5000 1"
@@ -534,6 +588,7 @@ mod e2e {
         Qemu,
         crate::bridge::Bridge,
         std::sync::mpsc::Receiver<String>,
+        Option<String>,
     )> {
         cmd.stdin(Stdio::null())
             .stdout(Stdio::piped())
@@ -600,21 +655,27 @@ mod e2e {
             }
         });
         let deadline = Instant::now() + Duration::from_secs(20);
-        let mut pty = None;
+        let (mut pty, mut second) = (None, None);
         let mut started = false;
         while pty.is_none() || !started {
             let left = deadline.saturating_duration_since(Instant::now());
             let line = rx
                 .recv_timeout(left)
                 .map_err(|_| "QEMU did not announce its pty and the firmware's start")?;
+            // "char device redirected to /dev/pts/N (label serial0)"
             if let Some(rest) = line.strip_prefix("char device redirected to ") {
-                pty = rest.split_whitespace().next().map(str::to_string);
+                let path = rest.split_whitespace().next().map(str::to_string);
+                if rest.contains("serial1") {
+                    second = path;
+                } else {
+                    pty = path;
+                }
             }
             started |= line.starts_with("firmware:");
         }
         let pty = pty.ok_or("no pty")?;
         let bridge = crate::bridge::start(&pty)?;
-        Ok((qemu, bridge, rx))
+        Ok((qemu, bridge, rx, second))
     }
 
     /// What a user does with the observer over Modbus (mbpoll), running at 50 %: read the
@@ -694,7 +755,7 @@ mod e2e {
         let mut cmd = qemu_command(elf, &["mode=0".into()]);
         cmd.args(["-display", "none", "-monitor", "none"])
             .args(["-serial", "pty", "-serial", "null"]);
-        let (qemu, bridge, _) = start_pty(elf, cmd, false)?;
+        let (qemu, bridge, _, _) = start_pty(elf, cmd, false)?;
         let pty = bridge.path.clone();
         let mut report = format!("SCADA on {pty}\n");
 
@@ -878,6 +939,140 @@ mod line {
         }
     }
 
+    /// SCADA flooded for `seconds` with the VFD link busy: the VFD master on USART2 talking to
+    /// `pumpbench vfd-sim` (a drive over a serial line: its interrupts, its queue), and
+    /// requests back to back as fast as the answers come, one in ten sent as two requests in
+    /// one write. Fails if any request goes unanswered or wrong, if a received byte was lost
+    /// (the firmware counts a full queue or an overrun), or if the drive's link fails.
+    ///
+    /// In real time (`icount` false) it also fails if the loop's sample counter strays from
+    /// the wall clock by more than 1 %. With `-icount shift=0` (`icount` true) QEMU's clock
+    /// advances one ns per instruction while the core runs, so the firmware's margins are
+    /// instruction counts; its clock then runs slower than the wall's whenever the host
+    /// emulates under 1 G instructions/s, so the rate is reported, not checked. Returns the
+    /// report, with the firmware's last `margin:` line.
+    pub fn flood(elf: &std::path::Path, seconds: u64, icount: bool) -> Result<String> {
+        use crate::e2e::{start_pty, Qemu};
+        let mut cmd = crate::qemu_command(
+            elf,
+            &["mode=1".into(), "setpoint=5000".into(), "vfd=uart".into()],
+        );
+        cmd.args(["-display", "none", "-monitor", "none"])
+            .args(["-serial", "pty", "-serial", "pty"]);
+        if icount {
+            cmd.args(["-icount", "shift=0"]);
+        }
+        let (qemu, bridge, log, vfd_pty) = start_pty(elf, cmd, false)?;
+        let vfd_pty = vfd_pty.ok_or("QEMU announced no pty for USART2")?;
+        let sim = std::process::Command::new(std::env::var_os("CARGO").unwrap_or("cargo".into()))
+            .current_dir(crate::root())
+            .args([
+                "run",
+                "--quiet",
+                "-p",
+                "pumpbench",
+                "--",
+                "vfd-sim",
+                "--port",
+                &vfd_pty,
+            ])
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .map_err(|e| format!("cannot start pumpbench vfd-sim: {e}"))?;
+        let _sim = Qemu(sim); // killed when dropped
+        let port = Port::open(&bridge.path)?;
+        // The drive's link up (status bit 3) before the flood.
+        let t = Instant::now();
+        loop {
+            let ok = port
+                .inputs(0, 1, Duration::from_secs(1))?
+                .is_some_and(|r| r[0] & 0b1000 != 0);
+            if ok {
+                break;
+            }
+            if t.elapsed() > Duration::from_secs(60) {
+                return Err("the VFD link over USART2 to pumpbench vfd-sim did not come up".into());
+            }
+            std::thread::sleep(Duration::from_millis(200));
+        }
+        let (s0, t0) = (port.samples()?, Instant::now());
+        let (mut sent, mut answered, mut status_or) = (0u32, 0u32, 0u16);
+        let mut status_and = 0xFFFFu16;
+        while t0.elapsed() < Duration::from_secs(seconds) {
+            if sent % 10 == 9 {
+                let (a, b) = (frame(&[1, 4, 0, 0, 0, 18]), frame(&[1, 3, 0, 0, 0, 3]));
+                port.send(&[a, b].concat())?;
+                sent += 2;
+                let both = port.recv(41 + 11, Duration::from_secs(1));
+                let ok = both.len() == 52
+                    && both[..3] == [1, 4, 36]
+                    && crc16(&both[..39]).to_le_bytes() == both[39..41]
+                    && both[41..44] == [1, 3, 6]
+                    && crc16(&both[41..50]).to_le_bytes() == both[50..52];
+                answered += 2 * u32::from(ok);
+            } else {
+                sent += 1;
+                if let Some(r) = port.inputs(0, 18, Duration::from_secs(1))? {
+                    answered += 1;
+                    status_or |= r[0];
+                    status_and &= r[0];
+                }
+            }
+        }
+        let (s1, wall) = (port.samples()?, t0.elapsed().as_secs_f64());
+        let rate = f64::from(s1.wrapping_sub(s0)) / (wall * 20.0) - 1.0;
+        // The firmware logs its margins once a second; the last line covers the flood.
+        std::thread::sleep(Duration::from_millis(1500));
+        drop(qemu);
+        let lines: Vec<String> = log.try_iter().collect();
+        let margin = lines
+            .iter()
+            .rev()
+            .find(|l| l.starts_with("margin:"))
+            .ok_or("the firmware logged no margin line")?
+            .clone();
+        let get = |k: &str| -> Result<u64> { crate::num(&margin, k) };
+        let (lost, bytes) = (get("lost")?, get("bytes")?);
+        let mut report = format!(
+            "flood, {seconds} s {}, VFD on USART2 to pumpbench vfd-sim: {answered} of {sent} requests answered ({:.0}/s), loop at {:+.2} % of wall time{}\n  firmware: {margin}\n  rx_wait_bound = usart_max + masked_max; {}\n",
+            if icount { "under -icount shift=0" } else { "in real time" },
+            f64::from(sent) / wall,
+            rate * 100.0,
+            if icount { " (QEMU's clock, not checked)" } else { "" },
+            if icount {
+                "counts are instructions (QEMU -icount shift=0)"
+            } else {
+                "counts are QEMU's virtual ns in real time: the host's speed, not the MCU's"
+            }
+        );
+        for l in lines
+            .iter()
+            .filter(|l| l.starts_with("ERROR") || l.starts_with("WARN"))
+        {
+            report.push_str(&format!("  firmware said: {l}\n"));
+        }
+        if answered != sent {
+            return Err(format!(
+                "{} requests unanswered or wrong under the flood\n{report}",
+                sent - answered
+            ));
+        }
+        if lost != 0 {
+            return Err(format!("{lost} received bytes lost\n{report}"));
+        }
+        if bytes < u64::from(sent) * 8 {
+            return Err(format!("the firmware counted {bytes} bytes received, fewer than the {sent} requests hold\n{report}"));
+        }
+        if status_and & 0b1000 == 0 || status_or & 0b100_0000 != 0 {
+            return Err(format!("the VFD link failed during the flood (status seen: and {status_and:#06b}, or {status_or:#09b})\n{report}"));
+        }
+        if !icount && rate.abs() > 0.01 {
+            return Err(format!("the loop's rate depends on the flood\n{report}"));
+        }
+        Ok(report)
+    }
+
     pub fn checks(pty: &str, bridge: &Bridge, report: &mut String) -> Result {
         // 1. Traffic does not slow the loop: 50 reads a second for 10 s, sample counter
         //    (20 per second) against wall time.
@@ -1051,6 +1246,8 @@ fn test() -> Result {
     bench::run_bench(&bench::Options::default())?;
     let elf = firmware_elf(Board::Qemu);
     build_firmware(Board::Qemu)?;
+    eprintln!("==> on-target checks in QEMU (boards/qemu selftest)");
+    print!("{}", selftest()?);
     eprintln!("==> QEMU runs against the host replay (netduinoplus2, -icount shift=0,sleep=off)");
     const RUN_MS: u32 = 20_000;
     for narmax in ["f32", "q15"] {
@@ -1067,6 +1264,9 @@ fn test() -> Result {
     }
     eprintln!("==> end to end: QEMU in real time, SCADA on a pty, mbpoll as the client");
     print!("{}", e2e::run(&elf)?);
+    eprintln!("==> SCADA flooded, the VFD on USART2 busy: in real time, then -icount shift=0");
+    print!("{}", line::flood(&elf, FLOOD_S, false)?);
+    print!("{}", line::flood(&elf, FLOOD_S, true)?);
     eprintln!(
         "all checks passed in {:.0} s",
         start.elapsed().as_secs_f64()
@@ -1086,11 +1286,16 @@ fn main() -> ExitCode {
             }),
             Some(other) => Err(format!("unknown option '{other}'\n{BENCH_USAGE}")),
         },
+        Some("flood") => build_firmware(Board::Qemu).and_then(|()| {
+            print!("{}", line::flood(&firmware_elf(Board::Qemu), FLOOD_S, false)?);
+            print!("{}", line::flood(&firmware_elf(Board::Qemu), FLOOD_S, true)?);
+            Ok(())
+        }),
         Some("e2e") => build_firmware(Board::Qemu).and_then(|()| {
             print!("{}", e2e::run(&firmware_elf(Board::Qemu))?);
             Ok(())
         }),
-        _ => Err(format!("usage: cargo xtask <qemu|bench|test|e2e>\n  qemu   build the firmware and run it in QEMU on the virtual bench\n  bench  the kernels' instructions per call on the MCU, image sizes, checked against bench/baseline.json and the budgets\n  test   fmt, clippy, tests, the bench and its budgets, QEMU runs against the host, mbpoll end to end\n  e2e    only the mbpoll end-to-end test\n{QEMU_USAGE}\n{BENCH_USAGE}")),
+        _ => Err(format!("usage: cargo xtask <qemu|bench|test|e2e|flood>\n  qemu   build the firmware and run it in QEMU on the virtual bench\n  bench  the kernels' instructions per call on the MCU, image sizes, checked against bench/baseline.json and the budgets\n  test   fmt, clippy, tests, the bench and its budgets, QEMU runs against the host, mbpoll end to end\n  e2e    only the mbpoll end-to-end test\n  flood  only the margins under a SCADA flood with the VFD link busy\n{QEMU_USAGE}\n{BENCH_USAGE}")),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -5,9 +5,10 @@
 //!
 //! | priority | task | here |
 //! |---|---|---|
-//! | 3 | `usart1`, `usart6` (RXNE, TC) and `tim6`, `tim7` (the RTU gap) | bytes into and out of `heapless` queues |
-//! | 2 | `control` (SysTick, 1 kHz) | one [`firmware::Core`] step, ADC, DAC, watchdog, LED |
-//! | 1 | `scada`, `vfd`, `log` | the SCADA server, the VFD master, defmt lines |
+//! | 4 | `usart1`, `usart6` (RXNE, TC) and `tim6`, `tim7` (the RTU gap) | bytes into and out of `heapless` queues |
+//! | 3 | `control` (SysTick, 1 kHz) | one [`firmware::Core`] step, ADC, DAC, watchdog, LED |
+//! | 2 | `vfd` | the VFD master, one pass per step |
+//! | 1 | `scada`, `log` | the SCADA server, defmt lines |
 //! | idle | | `wfi` |
 //!
 //! # Serial lines
@@ -184,7 +185,7 @@ mod app {
     type VfdIsr = PortIsr<Tx<pac::USART6>, Rx<pac::USART6>, PB0<Output<PushPull>>>;
 
     /// A port's interrupt side and its gap timer, shared by the USART's and the timer's
-    /// handlers (both priority 3: the lock costs nothing).
+    /// handlers (both priority 4: the lock costs nothing).
     pub struct Line<P> {
         port: P,
         gap: CounterUs<pac::TIM6>,
@@ -406,7 +407,7 @@ mod app {
     /// Turns the transmission-complete interrupt of a USART on while it sends.
     macro_rules! tc_interrupt {
         ($usart:ty, $on:expr) => {
-            // SAFETY: one read-modify-write of CR1's TCIE bit from the port's own priority-3
+            // SAFETY: one read-modify-write of CR1's TCIE bit from the port's own priority-4
             // handlers, which never preempt each other; the HAL's halves only touch CR1 at
             // start-up.
             unsafe { (*<$usart>::ptr()).cr1().modify(|_, w| w.tcie().bit($on)) }
@@ -415,7 +416,7 @@ mod app {
 
     /// SCADA's USART: received bytes into the queue (each restarts the gap timer), the answer
     /// out byte by byte on TC.
-    #[task(binds = USART1, priority = 3, shared = [scada_line])]
+    #[task(binds = USART1, priority = 4, shared = [scada_line])]
     fn usart1(mut cx: usart1::Context) {
         let t0 = cycles();
         cx.shared.scada_line.lock(|l| {
@@ -436,7 +437,7 @@ mod app {
     }
 
     /// SCADA's line has been silent for 3.5 characters: the frame is complete.
-    #[task(binds = TIM6_DAC, priority = 3, shared = [scada_line], local = [scada_wake_gap])]
+    #[task(binds = TIM6_DAC, priority = 4, shared = [scada_line], local = [scada_wake_gap])]
     fn tim6(mut cx: tim6::Context) {
         cx.shared.scada_line.lock(|l| {
             l.gap.clear_flags(Flag::Update);
@@ -447,7 +448,7 @@ mod app {
     }
 
     /// The VFD's USART, as USART1.
-    #[task(binds = USART6, priority = 3, shared = [vfd_line])]
+    #[task(binds = USART6, priority = 4, shared = [vfd_line])]
     fn usart6(mut cx: usart6::Context) {
         let t0 = cycles();
         cx.shared.vfd_line.lock(|l| {
@@ -468,7 +469,7 @@ mod app {
     }
 
     /// The VFD's line has been silent for 3.5 characters.
-    #[task(binds = TIM7, priority = 3, shared = [vfd_line])]
+    #[task(binds = TIM7, priority = 4, shared = [vfd_line])]
     fn tim7(mut cx: tim7::Context) {
         cx.shared.vfd_line.lock(|l| {
             l.gap.clear_flags(Flag::Update);
@@ -479,7 +480,7 @@ mod app {
 
     /// Every 1 ms: the due ADC conversions, one controller step, the torque reference to the
     /// DAC, the watchdog fed; then the links are woken with what the step left them.
-    #[task(binds = SysTick, priority = 2,
+    #[task(binds = SysTick, priority = 3,
            local = [core, adc, pressure_pin, flow_pin, dac, watchdog, led, vfd_tx, log_tx,
                     scada_wake, steps: u32 = 0],
            shared = [commands, published, vfd_status])]
@@ -548,7 +549,7 @@ mod app {
     }
 
     /// The VFD master: one pass per control step, at the step's time.
-    #[task(priority = 1, local = [vfd, vfd_port, vfd_rx], shared = [vfd_status])]
+    #[task(priority = 2, local = [vfd, vfd_port, vfd_rx], shared = [vfd_status])]
     async fn vfd(mut cx: vfd::Context) {
         while let Ok(r) = cx.local.vfd_rx.recv().await {
             let port = &mut *cx.local.vfd_port;

@@ -3,9 +3,10 @@
 //!
 //! | priority | task | here |
 //! |---|---|---|
-//! | 3 | `usart1`, `usart2` | SCADA and VFD bytes into `heapless` queues, frames out |
-//! | 2 | `control` (SysTick) | one [`firmware::Core`] step per elapsed ms, the virtual bench stepped |
-//! | 1 | `scada`, `vfd`, `log` | the SCADA server, the VFD master, defmt lines |
+//! | 4 | `usart1`, `usart2` | SCADA and VFD bytes into `heapless` queues, frames out |
+//! | 3 | `control` (SysTick) | one [`firmware::Core`] step per elapsed ms, the virtual bench stepped |
+//! | 2 | `vfd` | the VFD master, one pass per step |
+//! | 1 | `scada`, `log` | the SCADA server, defmt lines |
 //! | idle | | `wfi` |
 //!
 //! - The transmitters, the torque output and the drive are [`VirtualIo`]: the white-box
@@ -34,105 +35,8 @@
 #![no_std]
 #![no_main]
 
-mod args;
-
-use cortex_m_semihosting::debug;
-use defmt_semihosting as _;
+use board_qemu::{args, exit, now_ns, now_us, BAUD, QEMU_SILENCE_US, QEMU_SYSTICK_HZ, WAKE_HZ};
 use stm32f4xx_hal::pac;
-
-/// SysTick under QEMU, Hz (QEMU clocks it at 168 MHz whatever the RCC says).
-const QEMU_SYSTICK_HZ: u32 = 168_000_000;
-/// SysTick rate, Hz: four wake-ups per control step (see the module docs).
-const WAKE_HZ: u32 = 4000;
-/// Line speed, baud (QEMU's serial back-ends ignore it; a board uses it).
-const BAUD: u32 = 19_200;
-/// Silence that ends an RTU frame under QEMU, µs: QEMU hands over one byte each time the
-/// guest reads the last one, with no line timing, and a busy host can delay a byte by a few
-/// milliseconds; 10 ms keeps frames whole and is far below any master's timeout.
-const QEMU_SILENCE_US: u32 = 10_000;
-
-/// Microseconds from TIM5 running free at 1 MHz (wraps every 71 min).
-fn now_us() -> u32 {
-    // SAFETY: a read of a free-running counter register; TIM5 is set up once in `init` and
-    // never written again.
-    unsafe { (*pac::TIM5::ptr()).cnt().read().bits() }
-}
-
-/// QEMU's virtual nanoseconds from TIM2 running free at 1 GHz (instructions under
-/// `-icount shift=0`; wraps every 4.3 s: for differences only).
-fn now_ns() -> u32 {
-    // SAFETY: as for TIM5.
-    unsafe { (*pac::TIM2::ptr()).cnt().read().bits() }
-}
-
-/// Starts `tim` (TIM2 or TIM5, 32-bit) from 0, free-running at QEMU's 1 GHz / (`psc` + 1),
-/// no interrupts.
-macro_rules! free_running {
-    ($tim:expr, $psc:expr) => {{
-        let t = $tim;
-        t.psc().write(|w| w.psc().set($psc));
-        t.arr().write(|w| w.arr().set(u32::MAX));
-        t.egr().write(|w| w.ug().set_bit());
-        t.cr1().modify(|_, w| w.cen().set_bit());
-    }};
-}
-
-// Fault report: the HardFault handler's frame (or a stack overflow caught by flip-link's
-// layout), logged, then QEMU exits with status 1.
-core::arch::global_asm!(
-    ".section .HardFaultTrampoline, \"ax\"",
-    ".global HardFault",
-    ".type HardFault,%function",
-    ".thumb_func",
-    "HardFault:",
-    // flip-link puts the stack at the bottom of RAM: an overflow leaves SP below it, and the
-    // handler's first push would fault again (lockup). Move SP back to the top first.
-    "  mrs r0, MSP",
-    "  ldr r1, =_stack_end",
-    "  cmp r0, r1",
-    "  bhs 1f",
-    "  ldr r1, =_stack_start",
-    "  msr MSP, r1",
-    "  movs r0, #0",
-    "1:",
-    "  b {handler}",
-    ".ltorg",
-    handler = sym hard_fault,
-);
-
-/// Logs the fault and exits QEMU with status 1.
-///
-/// # Safety
-/// Called only by the `HardFault` trampoline, with the exception frame (or null after a stack
-/// overflow).
-unsafe extern "C" fn hard_fault(ef: *const cortex_m_rt::ExceptionFrame) -> ! {
-    // SAFETY: the trampoline passes the stacked frame, or null.
-    match unsafe { ef.as_ref() } {
-        Some(ef) => defmt::error!(
-            "HardFault at pc={=u32:#010x} lr={=u32:#010x}",
-            ef.pc(),
-            ef.lr()
-        ),
-        None => defmt::error!("HardFault: stack overflow"),
-    }
-    debug::exit(debug::EXIT_FAILURE);
-    #[allow(clippy::empty_loop)]
-    loop {}
-}
-
-/// A panic is logged once and exits QEMU with status 1.
-#[panic_handler]
-fn panic(info: &core::panic::PanicInfo) -> ! {
-    use core::sync::atomic::{AtomicBool, Ordering};
-    static PANICKED: AtomicBool = AtomicBool::new(false);
-    cortex_m::interrupt::disable();
-    if !PANICKED.swap(true, Ordering::Relaxed) {
-        defmt::error!("panic: {}", defmt::Display2Format(info));
-    }
-    debug::exit(debug::EXIT_FAILURE);
-    #[allow(clippy::empty_loop)]
-    loop {}
-}
 
 /// The timing margins of this run (TIM2 counts: instructions under `-icount shift=0`).
 static MARGIN: firmware::Margin = firmware::Margin::new();
@@ -228,9 +132,7 @@ mod app {
                     "bad argument '{=[u8]:a}' (see boards/qemu/src/args.rs)",
                     word
                 );
-                debug::exit(debug::EXIT_FAILURE);
-                #[allow(clippy::empty_loop)]
-                loop {}
+                exit(false)
             }
         };
         let config = Config {
@@ -243,9 +145,7 @@ mod app {
         };
         let fail = |what: &str| -> ! {
             defmt::error!("cannot start: {=str}", what);
-            debug::exit(debug::EXIT_FAILURE);
-            #[allow(clippy::empty_loop)]
-            loop {}
+            exit(false)
         };
         let core = firmware::build_core(&config).unwrap_or_else(|_| fail("controller"));
         let scada = ScadaLink::new(&config).unwrap_or_else(|_| fail("SCADA"));
@@ -256,11 +156,7 @@ mod app {
 
         let dp = cx.device;
         // The time bases (see the module docs).
-        dp.RCC
-            .apb1enr()
-            .modify(|_, w| w.tim2en().set_bit().tim5en().set_bit());
-        free_running!(&dp.TIM5, 999);
-        free_running!(&dp.TIM2, 0);
+        board_qemu::start_time_bases(&dp.RCC, &dp.TIM2, &dp.TIM5);
         // HSI 16 MHz: QEMU hangs on a PLL-ready wait.
         let mut rcc = dp.RCC.freeze(RccConfig::hsi());
         let gpioa = dp.GPIOA.split(&mut rcc);
@@ -348,7 +244,7 @@ mod app {
     }
 
     /// SCADA's USART: bytes into the queue, the answer out; wakes the SCADA task.
-    #[task(binds = USART1, priority = 3, local = [port1, scada_wake_isr])]
+    #[task(binds = USART1, priority = 4, local = [port1, scada_wake_isr])]
     fn usart1(cx: usart1::Context) {
         let t0 = now_ns();
         // QEMU: the transmit interrupts never fire, so a frame is written out here at once.
@@ -358,7 +254,7 @@ mod app {
     }
 
     /// The VFD's USART (with `vfd=uart`).
-    #[task(binds = USART2, priority = 3, local = [port2])]
+    #[task(binds = USART2, priority = 4, local = [port2])]
     fn usart2(cx: usart2::Context) {
         let t0 = now_ns();
         while cx.local.port2.on_interrupt(&MARGIN) {}
@@ -367,7 +263,7 @@ mod app {
 
     /// Every elapsed millisecond of TIM5: one controller step, its outputs to the virtual
     /// bench, the bench stepped; then the links are woken with what the step left them.
-    #[task(binds = SysTick, priority = 2,
+    #[task(binds = SysTick, priority = 3,
            local = [core, ms, run_ms, stopped, vfd_tx, log_tx, scada_wake],
            shared = [io, commands, published, vfd_status])]
     fn control(mut cx: control::Context) {
@@ -442,7 +338,7 @@ mod app {
     }
 
     /// The VFD master: one pass per control step, at the step's time, with its request.
-    #[task(priority = 1, local = [vfd, vfd_port, vfd_rx], shared = [io, vfd_status])]
+    #[task(priority = 2, local = [vfd, vfd_port, vfd_rx], shared = [io, vfd_status])]
     async fn vfd(mut cx: vfd::Context) {
         while let Ok(r) = cx.local.vfd_rx.recv().await {
             let link = &mut *cx.local.vfd;
@@ -489,11 +385,7 @@ mod app {
                         m.rx_wait_bound(),
                         m.bytes_lost
                     );
-                    debug::exit(if failed || m.bytes_lost > 0 {
-                        debug::EXIT_FAILURE
-                    } else {
-                        debug::EXIT_SUCCESS
-                    });
+                    exit(!failed && m.bytes_lost == 0);
                 }
             }
         }

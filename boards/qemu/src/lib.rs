@@ -1,0 +1,123 @@
+//! What the QEMU board's binaries share: the time bases, the fault and panic handlers that
+//! report and exit QEMU with status 1, the start-up arguments.
+#![no_std]
+
+pub mod args;
+
+use cortex_m_semihosting::debug;
+use defmt_semihosting as _;
+use stm32f4xx_hal::pac;
+
+/// SysTick under QEMU, Hz (QEMU clocks it at 168 MHz whatever the RCC says).
+pub const QEMU_SYSTICK_HZ: u32 = 168_000_000;
+/// SysTick rate, Hz: four wake-ups per control step (see the module docs).
+pub const WAKE_HZ: u32 = 4000;
+/// Line speed, baud (QEMU's serial back-ends ignore it; a board uses it).
+pub const BAUD: u32 = 19_200;
+/// Silence that ends an RTU frame under QEMU, µs: QEMU hands over one byte each time the
+/// guest reads the last one, with no line timing, and a busy host can delay a byte by a few
+/// milliseconds; 10 ms keeps frames whole and is far below any master's timeout.
+pub const QEMU_SILENCE_US: u32 = 10_000;
+
+/// Microseconds from TIM5 running free at 1 MHz (wraps every 71 min).
+pub fn now_us() -> u32 {
+    // SAFETY: a read of a free-running counter register; TIM5 is set up once in `init` and
+    // never written again.
+    unsafe { (*pac::TIM5::ptr()).cnt().read().bits() }
+}
+
+/// QEMU's virtual nanoseconds from TIM2 running free at 1 GHz (instructions under
+/// `-icount shift=0`; wraps every 4.3 s: for differences only).
+pub fn now_ns() -> u32 {
+    // SAFETY: as for TIM5.
+    unsafe { (*pac::TIM2::ptr()).cnt().read().bits() }
+}
+
+/// Starts `tim` (TIM2 or TIM5, 32-bit) from 0, free-running at QEMU's 1 GHz / (`psc` + 1),
+/// no interrupts.
+#[macro_export]
+macro_rules! free_running {
+    ($tim:expr, $psc:expr) => {{
+        let t = $tim;
+        t.psc().write(|w| w.psc().set($psc));
+        t.arr().write(|w| w.arr().set(u32::MAX));
+        t.egr().write(|w| w.ug().set_bit());
+        t.cr1().modify(|_, w| w.cen().set_bit());
+    }};
+}
+
+// Fault report: the HardFault handler's frame (or a stack overflow caught by flip-link's
+// layout), logged, then QEMU exits with status 1.
+core::arch::global_asm!(
+    ".section .HardFaultTrampoline, \"ax\"",
+    ".global HardFault",
+    ".type HardFault,%function",
+    ".thumb_func",
+    "HardFault:",
+    // flip-link puts the stack at the bottom of RAM: an overflow leaves SP below it, and the
+    // handler's first push would fault again (lockup). Move SP back to the top first.
+    "  mrs r0, MSP",
+    "  ldr r1, =_stack_end",
+    "  cmp r0, r1",
+    "  bhs 1f",
+    "  ldr r1, =_stack_start",
+    "  msr MSP, r1",
+    "  movs r0, #0",
+    "1:",
+    "  b {handler}",
+    ".ltorg",
+    handler = sym hard_fault,
+);
+
+/// Logs the fault and exits QEMU with status 1.
+///
+/// # Safety
+/// Called only by the `HardFault` trampoline, with the exception frame (or null after a stack
+/// overflow).
+unsafe extern "C" fn hard_fault(ef: *const cortex_m_rt::ExceptionFrame) -> ! {
+    // SAFETY: the trampoline passes the stacked frame, or null.
+    match unsafe { ef.as_ref() } {
+        Some(ef) => defmt::error!(
+            "HardFault at pc={=u32:#010x} lr={=u32:#010x}",
+            ef.pc(),
+            ef.lr()
+        ),
+        None => defmt::error!("HardFault: stack overflow"),
+    }
+    debug::exit(debug::EXIT_FAILURE);
+    #[allow(clippy::empty_loop)]
+    loop {}
+}
+
+/// A panic is logged once and exits QEMU with status 1.
+#[panic_handler]
+fn panic(info: &core::panic::PanicInfo) -> ! {
+    use core::sync::atomic::{AtomicBool, Ordering};
+    static PANICKED: AtomicBool = AtomicBool::new(false);
+    cortex_m::interrupt::disable();
+    if !PANICKED.swap(true, Ordering::Relaxed) {
+        defmt::error!("panic: {}", defmt::Display2Format(info));
+    }
+    debug::exit(debug::EXIT_FAILURE);
+    #[allow(clippy::empty_loop)]
+    loop {}
+}
+
+/// Starts TIM5 at 1 MHz ([`now_us`]) and TIM2 at 1 GHz ([`now_ns`]), free-running.
+pub fn start_time_bases(rcc: &pac::RCC, tim2: &pac::TIM2, tim5: &pac::TIM5) {
+    rcc.apb1enr()
+        .modify(|_, w| w.tim2en().set_bit().tim5en().set_bit());
+    free_running!(tim5, 999);
+    free_running!(tim2, 0);
+}
+
+/// Ends the QEMU run with `code` (0 success).
+pub fn exit(ok: bool) -> ! {
+    debug::exit(if ok {
+        debug::EXIT_SUCCESS
+    } else {
+        debug::EXIT_FAILURE
+    });
+    #[allow(clippy::empty_loop)]
+    loop {}
+}
