@@ -128,6 +128,17 @@ impl Board {
             Board::Nucleo => "board-nucleo-f446re",
         }
     }
+    /// What the board's own `.cargo/config.toml` adds, for builds from the workspace root
+    /// (the Nucleo: `-C target-cpu=cortex-m4`).
+    fn config_args(self) -> &'static [&'static str] {
+        match self {
+            Board::Qemu => &[],
+            Board::Nucleo => &[
+                "--config",
+                "target.thumbv7em-none-eabihf.rustflags=[\"-C\", \"target-cpu=cortex-m4\"]",
+            ],
+        }
+    }
     /// The board's firmware binary.
     fn binary(self) -> &'static str {
         match self {
@@ -167,6 +178,7 @@ fn build_firmware(board: Board) -> Result {
                 "--target",
                 TARGET,
             ])
+            .args(board.config_args())
             .env("DEFMT_LOG", "info"),
     )
 }
@@ -1205,6 +1217,7 @@ fn test() -> Result {
             &format!("clippy (board {})", board.name()),
             cargo()
                 .args(["clippy", "-p", board.package(), "--target", TARGET])
+                .args(board.config_args())
                 .args(["--profile", "firmware", "--", "-D", "warnings"]),
         )?;
     }
