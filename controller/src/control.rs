@@ -270,13 +270,9 @@ impl VfdStatus {
     };
 
     /// The torque reference applied for a requested one, %: 0 during the link alarm (and
-    /// for NaN), else the request clamped to 0..=100.
+    /// for NaN), else the request clamped to 0..=100 ([`crate::vfd::applied_torque_pct`]).
     pub fn applied_torque_pct(&self, requested_pct: f32) -> f32 {
-        if self.link_alarm || requested_pct.is_nan() {
-            0.0
-        } else {
-            requested_pct.clamp(0.0, 100.0)
-        }
+        crate::vfd::applied_torque_pct(self.link_alarm, requested_pct)
     }
 }
 

@@ -111,6 +111,17 @@ impl VfdMap {
     }
 }
 
+/// The torque reference applied for a requested one, %: the safe value 0 during the link
+/// alarm (and for NaN), else the request clamped to 0..=100. The one rule for the master and
+/// the core ([`crate::control::VfdStatus::applied_torque_pct`]).
+pub fn applied_torque_pct(link_alarm: bool, requested_pct: f32) -> f32 {
+    if link_alarm || requested_pct.is_nan() {
+        0.0
+    } else {
+        requested_pct.clamp(0.0, 100.0)
+    }
+}
+
 /// What the drive last reported.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -211,13 +222,10 @@ impl VfdMaster {
         self.reads_ok
     }
 
-    /// The torque reference that is written for a requested one: 0 % during the link alarm.
+    /// The torque reference that is written for a requested one: 0 % during the link alarm
+    /// (see [`applied_torque_pct`]).
     pub fn applied_torque_pct(&self, requested_pct: f32) -> f32 {
-        if self.alarm || requested_pct.is_nan() {
-            0.0
-        } else {
-            requested_pct.clamp(0.0, 100.0)
-        }
+        applied_torque_pct(self.alarm, requested_pct)
     }
 
     /// Handles time: an unanswered request past its timeout is repeated (the frame to send is

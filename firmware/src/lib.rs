@@ -195,10 +195,12 @@ impl MarginSnapshot {
 /// [`PortIsr::on_interrupt`] and keeps nothing else in it.
 pub mod port {
     use super::{Margin, Ordering};
-    use controller::link::VfdPort;
+    use controller::control::Commands;
+    use controller::link::{ScadaLink, VfdPort};
     use controller::modbus::Frame;
     use controller::rtu::Rs485;
     use controller::rtu::RtuFramer;
+    use controller::scada::Published;
     use embedded_hal::digital::OutputPin;
     use embedded_hal_nb::serial::{Read, Write};
     use heapless::spsc::{Consumer, Producer};
@@ -213,6 +215,15 @@ pub mod port {
     /// Frames a transmit queue holds (a slave answers one request at a time; a master waits
     /// for its answer): two, one going out and one waiting.
     pub const TX_QUEUE: usize = 3;
+
+    /// What one [`PortIsr::on_interrupt`] did.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+    pub struct Activity {
+        /// Bytes received (count).
+        pub received: u32,
+        /// A frame is still going out.
+        pub sending: bool,
+    }
 
     /// The interrupt side of one port (the board's priority-4 handler calls it).
     pub struct PortIsr<TX, RX, DE> {
@@ -242,9 +253,10 @@ pub mod port {
         /// The interrupt's work: every received byte into the receive queue (a byte the full
         /// queue cannot take, and a USART overrun, count in [`Margin::bytes_lost`]); the next
         /// queued frame started once the last one is out, and the bytes the transmitter takes.
-        /// Returns `true` while a frame is still going out (the board keeps its transmit
-        /// interrupt on, or, under QEMU where it never fires, calls again at once).
-        pub fn on_interrupt(&mut self, margin: &Margin) -> bool {
+        /// Returns what happened: bytes received (a board with a gap timer restarts it) and
+        /// whether a frame is still going out (the board keeps its transmit interrupt on, or,
+        /// under QEMU where it never fires, calls again at once).
+        pub fn on_interrupt(&mut self, margin: &Margin) -> Activity {
             let overruns = self.rs485.errors().overrun;
             let (mut got, mut lost) = (0u32, 0u32);
             let rx = &mut self.rx;
@@ -269,7 +281,10 @@ pub mod port {
             if self.rs485.sending() {
                 self.rs485.on_transmit();
             }
-            self.rs485.sending()
+            Activity {
+                received: got,
+                sending: self.rs485.sending(),
+            }
         }
 
         /// The port's line-error counts.
@@ -344,6 +359,32 @@ pub mod port {
             (self.pend)();
             true
         }
+    }
+
+    /// The SCADA server's work on a wake-up at `now_us`: every complete request from `port`
+    /// answered by `link` from the values `published` gives, its answer queued, and the
+    /// holding registers handed to `commands` after each. Returns the answers dropped because
+    /// the transmit queue was full (0 unless the line is stuck).
+    pub fn serve_scada(
+        port: &mut PortTask,
+        link: &mut ScadaLink,
+        now_us: u32,
+        mut published: impl FnMut() -> Published,
+        mut commands: impl FnMut(Commands),
+    ) -> u32 {
+        let (mut frame, mut answer) = (Frame::new(), Frame::new());
+        let mut dropped = 0;
+        port.now_us = now_us;
+        while port.receive_frame(&mut frame) {
+            link.publish(&published());
+            if let Some(n) = link.handle(&frame, &mut answer) {
+                if !port.send_frame(&answer[..n]) {
+                    dropped += 1;
+                }
+            }
+            commands(link.commands());
+        }
+        dropped
     }
 
     /// The VFD master's frames over a serial port.

@@ -199,12 +199,13 @@ fn qemu_command(elf: &Path, args: &[String]) -> Command {
     cmd
 }
 
-/// Runs an image (the firmware, the bench, a size probe) in QEMU to its end, deterministic and faster than real time
-/// (`-icount shift=0,sleep=off`); returns its standard output.
-fn qemu_output(elf: &Path, args: &[String]) -> Result<String> {
+/// Runs an image in QEMU to its end, deterministic and faster than real time (`-icount
+/// shift=0,sleep=off`), with `io` for its display and serial ports; returns whether it exited
+/// 0 and its standard output.
+fn qemu_run(elf: &Path, args: &[String], io: &[&str]) -> Result<(bool, Vec<u8>)> {
     let start = Instant::now();
     let mut cmd = qemu_command(elf, args);
-    cmd.args(["-nographic", "-icount", "shift=0,sleep=off"]);
+    cmd.args(io).args(["-icount", "shift=0,sleep=off"]);
     let out = Command::new("timeout")
         .arg(QEMU_TIMEOUT_S.to_string())
         .arg(cmd.get_program())
@@ -215,7 +216,6 @@ fn qemu_output(elf: &Path, args: &[String]) -> Result<String> {
         .map_err(|e| {
             format!("cannot start qemu-system-arm (apt-get install qemu-system-arm): {e}")
         })?;
-    let text = String::from_utf8_lossy(&out.stdout).into_owned();
     let name = elf.file_name().unwrap_or_default().to_string_lossy();
     eprintln!(
         "    qemu {name} {}: {:.1} s, {}",
@@ -223,17 +223,24 @@ fn qemu_output(elf: &Path, args: &[String]) -> Result<String> {
         start.elapsed().as_secs_f64(),
         out.status
     );
-    if !out.status.success() {
-        return Err(format!(
-            "{name} in QEMU exited with {}:\n{text}",
-            out.status
-        ));
-    }
-    Ok(text)
+    Ok((out.status.success(), out.stdout))
 }
 
-/// Runs a board's image in QEMU to its end as [`qemu_output`] does, its serial ports
-/// unconnected; returns its defmt log, decoded (an error if it exits non-zero).
+/// The text an image (the bench, a size probe) writes over semihosting, run by [`qemu_run`]
+/// with `-nographic`; an error if it exits non-zero.
+fn qemu_output(elf: &Path, args: &[String]) -> Result<String> {
+    let (ok, out) = qemu_run(elf, args, &["-nographic"])?;
+    let text = String::from_utf8_lossy(&out).into_owned();
+    if ok {
+        Ok(text)
+    } else {
+        let name = elf.file_name().unwrap_or_default().to_string_lossy();
+        Err(format!("{name} in QEMU exited non-zero:\n{text}"))
+    }
+}
+
+/// A board's image run by [`qemu_run`], its serial ports unconnected: its defmt log, decoded
+/// (an error if it exits non-zero).
 fn qemu_log(elf: &Path, args: &[String]) -> Result<String> {
     let (ok, text) = qemu_log_status(elf, args)?;
     if ok {
@@ -246,29 +253,11 @@ fn qemu_log(elf: &Path, args: &[String]) -> Result<String> {
 
 /// As [`qemu_log`], with whether the image exited 0.
 fn qemu_log_status(elf: &Path, args: &[String]) -> Result<(bool, String)> {
-    let start = Instant::now();
-    let mut cmd = qemu_command(elf, args);
-    cmd.args(["-display", "none", "-monitor", "none", "-serial", "null"])
-        .args(["-serial", "null", "-icount", "shift=0,sleep=off"]);
-    let out = Command::new("timeout")
-        .arg(QEMU_TIMEOUT_S.to_string())
-        .arg(cmd.get_program())
-        .args(cmd.get_args())
-        .stdin(Stdio::null())
-        .stderr(Stdio::inherit())
-        .output()
-        .map_err(|e| {
-            format!("cannot start qemu-system-arm (apt-get install qemu-system-arm): {e}")
-        })?;
-    let text = defmt_log::decode(elf, &out.stdout)?;
-    let name = elf.file_name().unwrap_or_default().to_string_lossy();
-    eprintln!(
-        "    qemu {name} {}: {:.1} s, {}",
-        args.join(" "),
-        start.elapsed().as_secs_f64(),
-        out.status
-    );
-    Ok((out.status.success(), text))
+    let io = [
+        "-display", "none", "-monitor", "none", "-serial", "null", "-serial", "null",
+    ];
+    let (ok, out) = qemu_run(elf, args, &io)?;
+    Ok((ok, defmt_log::decode(elf, &out)?))
 }
 
 /// The on-target checks (`boards/qemu`'s `selftest`) in QEMU: their digests must equal the
@@ -330,8 +319,9 @@ fn num<T: std::str::FromStr>(line: &str, key: &str) -> Result<T> {
         .map_err(|_| format!("bad '{key}' in line: {line}"))
 }
 
-/// The firmware's loop replayed on the host: the same `controller` code (App on the virtual
-/// bench, in-process drive), with the options the firmware announces in its header line.
+/// The firmware replayed on the host: the same `controller` code (the core, its links and the
+/// virtual bench with its in-process drive, run by `VirtualBoard` in the firmware's task
+/// order), with the options the firmware announces in its header line.
 /// Returns the log lines it makes for the ticks `0..=run_ms`.
 fn host_replay(header: &str, run_ms: u32) -> Result<Vec<String>> {
     use controller::bench::{VirtualBenchConfig, VirtualBoard};

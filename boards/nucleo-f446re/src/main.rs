@@ -184,22 +184,17 @@ mod app {
     type ScadaIsr = PortIsr<Tx<pac::USART1>, Rx<pac::USART1>, PA8<Output<PushPull>>>;
     type VfdIsr = PortIsr<Tx<pac::USART6>, Rx<pac::USART6>, PB0<Output<PushPull>>>;
 
-    /// A port's interrupt side and its gap timer, shared by the USART's and the timer's
+    /// A port's interrupt side and its gap timer `T`, shared by the USART's and the timer's
     /// handlers (both priority 4: the lock costs nothing).
-    pub struct Line<P> {
+    pub struct Line<P, T> {
         port: P,
-        gap: CounterUs<pac::TIM6>,
-    }
-    /// As [`Line`], with TIM7.
-    pub struct Line7<P> {
-        port: P,
-        gap: CounterUs<pac::TIM7>,
+        gap: CounterUs<T>,
     }
 
     #[shared]
     struct Shared {
-        scada_line: Line<ScadaIsr>,
-        vfd_line: Line7<VfdIsr>,
+        scada_line: Line<ScadaIsr, pac::TIM6>,
+        vfd_line: Line<VfdIsr, pac::TIM7>,
         commands: Commands,
         published: Published,
         vfd_status: VfdStatus,
@@ -366,7 +361,7 @@ mod app {
                     port: scada_isr,
                     gap: gap1,
                 },
-                vfd_line: Line7 {
+                vfd_line: Line {
                     port: vfd_isr,
                     gap: gap7,
                 },
@@ -420,18 +415,11 @@ mod app {
     fn usart1(mut cx: usart1::Context) {
         let t0 = cycles();
         cx.shared.scada_line.lock(|l| {
-            let before = MARGIN
-                .bytes_received
-                .load(core::sync::atomic::Ordering::Relaxed);
-            let sending = l.port.on_interrupt(&MARGIN);
-            if MARGIN
-                .bytes_received
-                .load(core::sync::atomic::Ordering::Relaxed)
-                != before
-            {
+            let done = l.port.on_interrupt(&MARGIN);
+            if done.received > 0 {
                 let _ = l.gap.start(gap_us(BAUD_BPS).micros());
             }
-            tc_interrupt!(pac::USART1, sending);
+            tc_interrupt!(pac::USART1, done.sending);
         });
         record_max(&MARGIN.usart_handler_max, cycles().wrapping_sub(t0));
     }
@@ -452,18 +440,11 @@ mod app {
     fn usart6(mut cx: usart6::Context) {
         let t0 = cycles();
         cx.shared.vfd_line.lock(|l| {
-            let before = MARGIN
-                .bytes_received
-                .load(core::sync::atomic::Ordering::Relaxed);
-            let sending = l.port.on_interrupt(&MARGIN);
-            if MARGIN
-                .bytes_received
-                .load(core::sync::atomic::Ordering::Relaxed)
-                != before
-            {
+            let done = l.port.on_interrupt(&MARGIN);
+            if done.received > 0 {
                 let _ = l.gap.start(gap_us(BAUD_BPS).micros());
             }
-            tc_interrupt!(pac::USART6, sending);
+            tc_interrupt!(pac::USART6, done.sending);
         });
         record_max(&MARGIN.usart_handler_max, cycles().wrapping_sub(t0));
     }
@@ -528,22 +509,21 @@ mod app {
 
     /// The SCADA server.
     #[task(priority = 1, local = [scada, scada_port, scada_rx], shared = [commands, published])]
-    async fn scada(mut cx: scada::Context) {
-        let (mut frame, mut answer) = (Frame::new(), Frame::new());
+    async fn scada(cx: scada::Context) {
+        let (mut published, mut commands) = (cx.shared.published, cx.shared.commands);
         while cx.local.scada_rx.recv().await.is_ok() {
-            let port = &mut *cx.local.scada_port;
-            port.now_us = now_us();
-            while port.receive_frame(&mut frame) {
-                let values = cx.shared.published.lock(|p| *p);
-                let link = &mut *cx.local.scada;
-                link.publish(&values);
-                if let Some(n) = link.handle(&frame, &mut answer) {
-                    if !port.send_frame(&answer[..n]) {
-                        defmt::warn!("SCADA answer dropped (transmit queue full)");
-                    }
-                }
-                let c = link.commands();
-                cx.shared.commands.lock(|x| *x = c);
+            let dropped = firmware::port::serve_scada(
+                cx.local.scada_port,
+                cx.local.scada,
+                now_us(),
+                || published.lock(|p| *p),
+                |c| commands.lock(|x| *x = c),
+            );
+            if dropped > 0 {
+                defmt::warn!(
+                    "{=u32} SCADA answers dropped (transmit queue full)",
+                    dropped
+                );
             }
         }
     }

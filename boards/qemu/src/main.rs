@@ -249,7 +249,7 @@ mod app {
     fn usart1(cx: usart1::Context) {
         let t0 = now_ns();
         // QEMU: the transmit interrupts never fire, so a frame is written out here at once.
-        while cx.local.port1.on_interrupt(&MARGIN) {}
+        while cx.local.port1.on_interrupt(&MARGIN).sending {}
         let _ = cx.local.scada_wake_isr.try_send(());
         record_max(&MARGIN.usart_handler_max, now_ns().wrapping_sub(t0));
     }
@@ -258,7 +258,7 @@ mod app {
     #[task(binds = USART2, priority = 4, local = [port2])]
     fn usart2(cx: usart2::Context) {
         let t0 = now_ns();
-        while cx.local.port2.on_interrupt(&MARGIN) {}
+        while cx.local.port2.on_interrupt(&MARGIN).sending {}
         record_max(&MARGIN.usart_handler_max, now_ns().wrapping_sub(t0));
     }
 
@@ -323,22 +323,21 @@ mod app {
 
     /// The SCADA server: requests from USART1's queue, answers back to it.
     #[task(priority = 1, local = [scada, scada_port, scada_rx], shared = [commands, published])]
-    async fn scada(mut cx: scada::Context) {
-        let (mut frame, mut answer) = (Frame::new(), Frame::new());
+    async fn scada(cx: scada::Context) {
+        let (mut published, mut commands) = (cx.shared.published, cx.shared.commands);
         while cx.local.scada_rx.recv().await.is_ok() {
-            let port = &mut *cx.local.scada_port;
-            port.now_us = now_us();
-            while port.receive_frame(&mut frame) {
-                let values = cx.shared.published.lock(|p| *p);
-                let link = &mut *cx.local.scada;
-                link.publish(&values);
-                if let Some(n) = link.handle(&frame, &mut answer) {
-                    if !port.send_frame(&answer[..n]) {
-                        defmt::warn!("SCADA answer dropped (transmit queue full)");
-                    }
-                }
-                let c = link.commands();
-                cx.shared.commands.lock(|x| *x = c);
+            let dropped = firmware::port::serve_scada(
+                cx.local.scada_port,
+                cx.local.scada,
+                now_us(),
+                || published.lock(|p| *p),
+                |c| commands.lock(|x| *x = c),
+            );
+            if dropped > 0 {
+                defmt::warn!(
+                    "{=u32} SCADA answers dropped (transmit queue full)",
+                    dropped
+                );
             }
         }
     }
