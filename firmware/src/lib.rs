@@ -10,7 +10,7 @@
 //! |---|---|---|
 //! | 4 (highest) | USART receive / transmit interrupts (and the Nucleo's RTU gap timers) | bytes into and out of `heapless` queues |
 //! | 3 | control, every 1 ms | [`controller::control::Controller::step`], torque output, watchdog |
-//! | 2 | VFD master | one pass per control step |
+//! | 2 | VFD master | one pass after each control step (a latest-only signal) |
 //! | 1 | SCADA server, log | Modbus requests, defmt lines |
 //! | idle | | `wfi` |
 //!

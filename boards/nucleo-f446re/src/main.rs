@@ -158,7 +158,8 @@ mod app {
     use firmware::{record_max, Core};
     use heapless::spsc::Queue;
     use rtic_sync::channel::{Receiver, Sender};
-    use rtic_sync::make_channel;
+    use rtic_sync::signal::{SignalReader, SignalWriter};
+    use rtic_sync::{make_channel, make_signal};
     use stm32f4xx_hal::{
         adc::{
             config::{AdcConfig, Clock, SampleTime},
@@ -179,7 +180,6 @@ mod app {
     /// fitted) settle fully. The sampling instant is the control step's, within its jitter.
     const SAMPLE_TIME: SampleTime = SampleTime::Cycles_480;
     const LOG_CAP: usize = 4;
-    const REQ_CAP: usize = 4;
 
     type ScadaIsr = PortIsr<Tx<pac::USART1>, Rx<pac::USART1>, PA8<Output<PushPull>>>;
     type VfdIsr = PortIsr<Tx<pac::USART6>, Rx<pac::USART6>, PB0<Output<PushPull>>>;
@@ -216,8 +216,8 @@ mod app {
         scada_wake: Sender<'static, (), 1>,
         scada_wake_gap: Sender<'static, (), 1>,
         scada_rx: Receiver<'static, (), 1>,
-        vfd_tx: Sender<'static, Request, REQ_CAP>,
-        vfd_rx: Receiver<'static, Request, REQ_CAP>,
+        vfd_req: SignalWriter<'static, Request>,
+        vfd_wait: SignalReader<'static, Request>,
         log_tx: Sender<'static, LogLine, LOG_CAP>,
         log_rx: Receiver<'static, LogLine, LOG_CAP>,
     }
@@ -337,7 +337,7 @@ mod app {
         syst.enable_counter();
 
         let (scada_wake, scada_rx) = make_channel!((), 1);
-        let (vfd_tx, vfd_rx) = make_channel!(Request, REQ_CAP);
+        let (vfd_req, vfd_wait) = make_signal!(Request);
         let (log_tx, log_rx) = make_channel!(LogLine, LOG_CAP);
 
         // The watchdog last, so that a slow start-up cannot reset the board in a loop;
@@ -384,8 +384,8 @@ mod app {
                 scada_wake_gap: scada_wake.clone(),
                 scada_wake,
                 scada_rx,
-                vfd_tx,
-                vfd_rx,
+                vfd_req,
+                vfd_wait,
                 log_tx,
                 log_rx,
             },
@@ -462,7 +462,7 @@ mod app {
     /// Every 1 ms: the due ADC conversions, one controller step, the torque reference to the
     /// DAC, the watchdog fed; then the links are woken with what the step left them.
     #[task(binds = SysTick, priority = 3,
-           local = [core, adc, pressure_pin, flow_pin, dac, watchdog, led, vfd_tx, log_tx,
+           local = [core, adc, pressure_pin, flow_pin, dac, watchdog, led, vfd_req, log_tx,
                     scada_wake, steps: u32 = 0],
            shared = [commands, published, vfd_status])]
     fn control(mut cx: control::Context) {
@@ -493,7 +493,7 @@ mod app {
             l.led.toggle();
         }
         cx.shared.published.lock(|p| *p = out.published);
-        let _ = l.vfd_tx.try_send(Request {
+        l.vfd_req.write(Request {
             t_ms: out.t_ms,
             torque_pct: out.requested_torque_pct,
         });
@@ -528,10 +528,11 @@ mod app {
         }
     }
 
-    /// The VFD master: one pass per control step, at the step's time.
-    #[task(priority = 2, local = [vfd, vfd_port, vfd_rx], shared = [vfd_status])]
+    /// The VFD master: one pass after each control step, at its time (a latest-only signal).
+    #[task(priority = 2, local = [vfd, vfd_port, vfd_wait], shared = [vfd_status])]
     async fn vfd(mut cx: vfd::Context) {
-        while let Ok(r) = cx.local.vfd_rx.recv().await {
+        loop {
+            let r = cx.local.vfd_wait.wait().await;
             let port = &mut *cx.local.vfd_port;
             port.now_us = now_us();
             let link = &mut *cx.local.vfd;

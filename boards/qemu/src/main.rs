@@ -52,7 +52,6 @@ struct Request {
 enum LogMsg {
     Line(controller::control::LogLine),
     Error(&'static str),
-    Warn(&'static str),
     Done { failed: bool },
 }
 
@@ -69,7 +68,8 @@ mod app {
     use firmware::{record_max, Core};
     use heapless::spsc::Queue;
     use rtic_sync::channel::{Receiver, Sender};
-    use rtic_sync::make_channel;
+    use rtic_sync::signal::{SignalReader, SignalWriter};
+    use rtic_sync::{make_channel, make_signal};
     use stm32f4xx_hal::prelude::*;
     use stm32f4xx_hal::rcc::Config as RccConfig;
     use stm32f4xx_hal::serial::{Rx, Serial, Tx};
@@ -83,7 +83,6 @@ mod app {
     type Port1 = PortIsr<Tx<pac::USART1>, Rx<pac::USART1>, NoDe>;
     type Port2 = PortIsr<Tx<pac::USART2>, Rx<pac::USART2>, NoDe>;
     const LOG_CAP: usize = 4;
-    const REQ_CAP: usize = 4;
 
     #[shared]
     struct Shared {
@@ -112,8 +111,8 @@ mod app {
         scada_wake: Sender<'static, (), 1>,
         scada_wake_isr: Sender<'static, (), 1>,
         scada_rx: Receiver<'static, (), 1>,
-        vfd_tx: Sender<'static, Request, REQ_CAP>,
-        vfd_rx: Receiver<'static, Request, REQ_CAP>,
+        vfd_req: SignalWriter<'static, Request>,
+        vfd_wait: SignalReader<'static, Request>,
         log_tx: Sender<'static, LogMsg, LOG_CAP>,
         log_rx: Receiver<'static, LogMsg, LOG_CAP>,
     }
@@ -194,7 +193,7 @@ mod app {
         syst.enable_counter();
 
         let (scada_wake, scada_rx) = make_channel!((), 1);
-        let (vfd_tx, vfd_rx) = make_channel!(Request, REQ_CAP);
+        let (vfd_req, vfd_wait) = make_signal!(Request);
         let (log_tx, log_rx) = make_channel!(LogMsg, LOG_CAP);
         defmt::info!(
             "firmware: virtual bench, SCADA unit 1 on USART1, VFD {=str}, mode={=u8} setpoint={=u16} seed={=u32} narmax={=str}{=str}",
@@ -229,8 +228,8 @@ mod app {
                 scada_wake_isr: scada_wake.clone(),
                 scada_wake,
                 scada_rx,
-                vfd_tx,
-                vfd_rx,
+                vfd_req,
+                vfd_wait,
                 log_tx,
                 log_rx,
             },
@@ -265,7 +264,7 @@ mod app {
     /// Every elapsed millisecond of TIM5: one controller step, its outputs to the virtual
     /// bench, the bench stepped; then the links are woken with what the step left them.
     #[task(binds = SysTick, priority = 3,
-           local = [core, ms, run_ms, stopped, vfd_tx, log_tx, scada_wake],
+           local = [core, ms, run_ms, stopped, vfd_req, log_tx, scada_wake],
            shared = [io, commands, published, vfd_status])]
     fn control(mut cx: control::Context) {
         let t0 = now_ns();
@@ -288,22 +287,12 @@ mod app {
                 break;
             };
             cx.shared.published.lock(|p| *p = out.published);
-            if cx
-                .local
-                .vfd_tx
-                .try_send(Request {
-                    t_ms: out.t_ms,
-                    torque_pct: out.requested_torque_pct,
-                })
-                .is_err()
-            {
-                // Only when QEMU catches up several late steps in one run of this task: the VFD
-                // master's next pass takes the latest request and time.
-                let _ = cx
-                    .local
-                    .log_tx
-                    .try_send(LogMsg::Warn("a VFD pass skipped (steps caught up at once)"));
-            }
+            // Latest only: when QEMU catches up several late steps in one run of this task,
+            // the VFD master's next pass takes the last step's request and time.
+            cx.local.vfd_req.write(Request {
+                t_ms: out.t_ms,
+                torque_pct: out.requested_torque_pct,
+            });
             let _ = cx.local.scada_wake.try_send(());
             MARGIN
                 .steps
@@ -342,10 +331,12 @@ mod app {
         }
     }
 
-    /// The VFD master: one pass per control step, at the step's time, with its request.
-    #[task(priority = 2, local = [vfd, vfd_port, vfd_rx], shared = [io, vfd_status])]
+    /// The VFD master: one pass after each control step, at its time, with its request (a
+    /// latest-only signal: after steps caught up at once, the last one).
+    #[task(priority = 2, local = [vfd, vfd_port, vfd_wait], shared = [io, vfd_status])]
     async fn vfd(mut cx: vfd::Context) {
-        while let Ok(r) = cx.local.vfd_rx.recv().await {
+        loop {
+            let r = cx.local.vfd_wait.wait().await;
             let link = &mut *cx.local.vfd;
             match cx.local.vfd_port {
                 Some(port) => {
@@ -381,7 +372,6 @@ mod app {
                     );
                 }
                 LogMsg::Error(what) => defmt::error!("{=str}", what),
-                LogMsg::Warn(what) => defmt::warn!("{=str}", what),
                 LogMsg::Done { failed } => {
                     let m = MARGIN.snapshot();
                     defmt::info!(
