@@ -11,6 +11,10 @@
 //!
 //! A fault clears with hysteresis: only after [`LoopConfig::clear_samples`] consecutive samples
 //! inside the 3.8..20.5 mA band.
+//!
+//! Every bound is read with one ADC step of tolerance (0.0054 mA on the typical loop): the
+//! ADC cannot place a current closer than that, and a healthy transmitter at NE 43's 3.8 mA
+//! floor reads one code under it.
 
 /// Below this loop current (mA) the transmitter is faulty (NE 43: broken wire).
 pub const FAULT_LOW_MA: f32 = 3.6;
@@ -137,8 +141,13 @@ impl AnalogInput {
     /// Takes one ADC sample.
     pub fn sample(&mut self, code: u16) -> Reading {
         let i = self.config.current_ma(code);
-        let fault = !(FAULT_LOW_MA..=FAULT_HIGH_MA).contains(&i);
-        let valid = (VALID_LOW_MA..=VALID_HIGH_MA).contains(&i);
+        // One ADC step of tolerance on every bound, as on the 4..20 mA one below: a
+        // transmitter saturated at 3.8 mA (NE 43's floor, where it sits at rest when the
+        // process is below its span) reads one code under it (code 707 = 3.798 mA on the
+        // typical loop) and must clear a fault.
+        let lsb = self.config.current_ma(1);
+        let fault = !(FAULT_LOW_MA - lsb..=FAULT_HIGH_MA + lsb).contains(&i);
+        let valid = (VALID_LOW_MA - lsb..=VALID_HIGH_MA + lsb).contains(&i);
         if fault {
             self.faulted = true;
             self.good_run = 0;
@@ -161,8 +170,7 @@ impl AnalogInput {
         }
         let value = self.config.value(i);
         self.last_good = value;
-        // One ADC step of tolerance: 4.000 mA must not read as out of range at 3.9997 mA.
-        let lsb = self.config.current_ma(1);
+        // 4.000 mA must not read as out of range at 3.9997 mA.
         Reading {
             value,
             current_ma: i,
@@ -242,6 +250,34 @@ mod tests {
         a.sample(code(&c, 25.0));
         a.sample(code(&c, 8.0));
         assert!(a.faulted());
+    }
+
+    /// Regression (defect 1 of the protection issue): a fault injected at rest never
+    /// cleared: a healthy transmitter at NE 43's floor (3.8 mA, the outlet below the span)
+    /// reads code 707 = 3.798 mA, one step under the 3.8 mA bound that clears a fault.
+    #[test]
+    fn a_transmitter_at_its_floor_clears_a_fault() {
+        let c = LoopConfig::typical(0.0, 10.0);
+        let floor = code(&c, VALID_LOW_MA);
+        assert_eq!(floor, 707);
+        assert!(c.current_ma(floor) < VALID_LOW_MA);
+        let mut a = AnalogInput::new(c).unwrap();
+        assert_eq!(a.sample(code(&c, 2.0)).status, Status::Fault);
+        a.sample(floor);
+        a.sample(floor);
+        let r = a.sample(floor);
+        assert!(!a.faulted(), "3 samples at the floor clear the fault");
+        assert_eq!((r.status, r.value), (Status::OutOfRange, 0.0));
+        // Two codes under the floor still do not clear it; at the fault bound, one code of
+        // tolerance, two are a fault.
+        assert_eq!(a.sample(code(&c, 2.0)).status, Status::Fault);
+        for _ in 0..5 {
+            assert_eq!(a.sample(floor - 2).status, Status::Fault);
+        }
+        let mut b = AnalogInput::new(c).unwrap();
+        let at = code(&c, FAULT_LOW_MA);
+        assert_ne!(b.sample(at).status, Status::Fault);
+        assert_eq!(b.sample(at - 2).status, Status::Fault);
     }
 
     #[test]

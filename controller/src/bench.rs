@@ -9,6 +9,12 @@
 //! checks as on a board. A loop current can be forced (a broken wire, a short) to exercise
 //! the fault path.
 //!
+//! Its drive limits the speed as real drives do (a maximum speed parameter): above
+//! [`VirtualBenchConfig::drive_speed_limit_rpm`] it takes its torque down to 0 over
+//! [`DRIVE_SPEED_LIMIT_BAND_RPM`], so a pump that loses its load settles near the limit
+//! instead of running away. The controller does not rely on it: its own overspeed
+//! protection ([`crate::protect`]) trips well below the drive's default limit.
+//!
 //! The noise is the sum of four uniform draws (SplitMix64), scaled to unit variance: bounded
 //! (±3.46 σ), cheap on an MCU without `log`/`cos`, and the same sequence on host and target.
 
@@ -46,11 +52,19 @@ pub struct VirtualBenchConfig {
     pub flow_loop: LoopConfig,
     /// Noise seed.
     pub seed: u64,
+    /// The drive's speed limit, rpm (> 0; infinite: none): above it the drive takes its
+    /// torque down to 0 over [`DRIVE_SPEED_LIMIT_BAND_RPM`].
+    pub drive_speed_limit_rpm: f32,
 }
+
+/// The band over which the drive's speed limiter takes the torque from the reference to 0,
+/// rpm.
+pub const DRIVE_SPEED_LIMIT_BAND_RPM: f32 = 50.0;
 
 impl VirtualBenchConfig {
     /// J +5 %, load torque +2 %, valve k2 +2 %; transmitters 0..10 mca and 0..30 l/s on
-    /// [`LoopConfig::typical`] loops, lags 20 / 40 ms, noise 3 mm / 0.02 l/s.
+    /// [`LoopConfig::typical`] loops, lags 20 / 40 ms, noise 3 mm / 0.02 l/s; the drive's
+    /// speed limit at 2 100 rpm (120 % of the motor's nominal 1 750).
     pub const fn default_offsets(seed: u64) -> Self {
         Self {
             inertia_factor: 1.05,
@@ -63,6 +77,7 @@ impl VirtualBenchConfig {
             pressure_loop: LoopConfig::typical(0.0, 10.0),
             flow_loop: LoopConfig::typical(0.0, 30.0),
             seed,
+            drive_speed_limit_rpm: 2100.0,
         }
     }
 }
@@ -83,6 +98,8 @@ pub struct VirtualBench {
     /// The pump runs dry (loss of prime): no flow, the outlet at its static level (−c), and
     /// only the friction part of the load curve (β9 ω + β10) left on the shaft.
     pub dry_run: bool,
+    /// The torque reference the drive delivered over the last step, %.
+    delivered_pct: f32,
 }
 
 impl VirtualBench {
@@ -99,6 +116,11 @@ impl VirtualBench {
                 "transmitter lags must be >= 0",
             ));
         }
+        if !(config.drive_speed_limit_rpm > 0.0) {
+            return Err(BenchError::InvalidParameter(
+                "the drive's speed limit must be > 0",
+            ));
+        }
         let bench = WhiteBox::new(p)?;
         let state = bench.steady_state(0.0)?;
         let s = bench.signals(&state);
@@ -112,6 +134,7 @@ impl VirtualBench {
             force_pressure_ma: None,
             force_flow_ma: None,
             dry_run: false,
+            delivered_pct: 0.0,
         })
     }
 
@@ -128,13 +151,27 @@ impl VirtualBench {
         self.bench.params().valve_k2
     }
 
-    /// Advances the bench by 1 ms with `torque_pct` (clamped to 0..=100 %, NaN as 0).
+    /// The torque reference the drive delivered over the last step, %: the reference, less
+    /// what its speed limiter took.
+    pub fn delivered_torque_pct(&self) -> f32 {
+        self.delivered_pct
+    }
+
+    /// Advances the bench by 1 ms with the torque reference `torque_pct` (clamped to
+    /// 0..=100 %, NaN as 0) to its drive, which delivers it below its speed limit.
     pub fn step_1ms(&mut self, torque_pct: f32) -> Result<(), BenchError> {
-        let u = if torque_pct.is_nan() {
+        let reference = if torque_pct.is_nan() {
             0.0
         } else {
             torque_pct.clamp(0.0, 100.0)
         };
+        let over = self.state.speed_rpm - self.config.drive_speed_limit_rpm;
+        let u = if over > 0.0 {
+            reference * (1.0 - over / DRIVE_SPEED_LIMIT_BAND_RPM).max(0.0)
+        } else {
+            reference
+        };
+        self.delivered_pct = u;
         if self.dry_run {
             // Friction only, no water: Euler at 1 ms is ample for this first-order run-up.
             let p = self.bench.params();
@@ -243,11 +280,12 @@ impl VirtualIo {
         self.bench.step_1ms(self.torque_pct)
     }
 
-    /// What the drive reports: the bench's speed and the torque it applies.
+    /// What the drive reports: the bench's speed and the torque it delivered (the
+    /// reference, less what its speed limiter took).
     pub fn drive_values(&self) -> DriveValues {
         DriveValues {
             speed_rpm: self.bench.signals().speed_rpm,
-            torque_pct: self.torque_pct,
+            torque_pct: self.bench.delivered_torque_pct(),
         }
     }
 }
@@ -436,6 +474,37 @@ mod tests {
         assert_eq!(p_in.sample(vb.pressure_code()).status, Status::Fault);
         vb.force_pressure_ma = Some(f32::NAN);
         assert_eq!(vb.pressure_code(), 0);
+    }
+
+    /// The drive's speed limit: a dry pump at 50 % settles near it instead of running away
+    /// (it reached 6 000 rpm before), and the drive reports the torque it delivers.
+    #[test]
+    fn the_drive_limits_a_runaway_to_its_speed_limit() {
+        let cfg = VirtualBenchConfig::default_offsets(1);
+        let mut vb = VirtualBench::new(cfg).unwrap();
+        vb.dry_run = true;
+        for _ in 0..10_000 {
+            vb.step_1ms(50.0).unwrap();
+        }
+        let w = vb.signals().speed_rpm;
+        let limit = cfg.drive_speed_limit_rpm;
+        assert!(
+            w > limit && w < limit + DRIVE_SPEED_LIMIT_BAND_RPM,
+            "{w} rpm"
+        );
+        let t = vb.delivered_torque_pct();
+        assert!(t > 0.0 && t < 50.0, "delivered {t} %");
+        // Wet, at 85 %, the limit takes nothing.
+        let mut vb = VirtualBench::new(cfg).unwrap();
+        for _ in 0..5000 {
+            vb.step_1ms(85.0).unwrap();
+        }
+        assert_eq!(vb.delivered_torque_pct(), 85.0);
+        assert!(VirtualBench::new(VirtualBenchConfig {
+            drive_speed_limit_rpm: f32::NAN,
+            ..cfg
+        })
+        .is_err());
     }
 
     #[test]

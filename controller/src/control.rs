@@ -6,6 +6,10 @@
 //! these small `Copy` structs with it.
 //!
 //! Each step:
+//! 0. the protections ([`crate::protect`]): the speed (the drive's last reading, else the
+//!    observer's) against the overspeed limit, a SCADA write of mode 0 acknowledging the
+//!    latched alarms and the trip, and the trip itself: while tripped (or not yet restarted
+//!    after a trip) the mode is taken as stop, whatever the mode register says;
 //! 1. the torque requested by the mode (holding register 1: stop → 0 %, manual → the
 //!    setpoint, profile → the paper's pulses, restarted from its seed on entry);
 //! 2. the applied reference: the requested one, or the safe value 0 % while the VFD link
@@ -28,6 +32,7 @@
 //! the QEMU run, bit for bit.
 
 use crate::analog::{AnalogInput, LoopConfig, Status as InputStatus};
+use crate::protect::{Protection, ProtectionConfig};
 use crate::scada::{Arithmetic, Mode, Published, Status};
 use crate::vfd::{VfdMap, VfdReadings};
 use model_core::excitation::McuPulses;
@@ -64,6 +69,8 @@ pub struct Config {
     /// The board has a virtual bench: SCADA holding registers 3 (valve) and 4 (fault
     /// injection) exist and are handed on in [`Outputs::bench`] every step.
     pub virtual_bench: bool,
+    /// The protections at start-up (SCADA holding registers 5..=7).
+    pub protection: ProtectionConfig,
 }
 
 impl Config {
@@ -81,6 +88,7 @@ impl Config {
             initial_setpoint: 0,
             initial_arithmetic: Arithmetic::F32,
             virtual_bench: false,
+            protection: ProtectionConfig::DEFAULT,
         }
     }
 }
@@ -122,15 +130,16 @@ pub struct NarmaxModel<const F: usize, const H: usize> {
 }
 
 impl<const F: usize, const H: usize> NarmaxModel<F, H> {
-    /// The model sampled every `period_ms` (≥ 1) ms; `float` and `fixed` are the same model's
-    /// two passes (both made by `pumpbench export`).
+    /// The model sampled every `period_ms` ms (1..=1000, the firmware's rule for a model's
+    /// period); `float` and `fixed` are the same model's two passes (both made by
+    /// `pumpbench export`).
     pub fn new(
         float: &'static NarxF32<F, H>,
         fixed: &'static NarxQ15<F, H>,
         period_ms: u32,
     ) -> Result<Self, Error> {
-        if period_ms == 0 {
-            return Err(Error::Config("NARMAX period must be >= 1 ms"));
+        if !(1..=1000).contains(&period_ms) {
+            return Err(Error::Config("NARMAX period must be 1..=1000 ms"));
         }
         let (u0, y0) = (0.0, float.output_mean());
         Ok(Self {
@@ -245,8 +254,11 @@ pub struct Commands {
     pub valve_permille: u16,
     /// Virtual bench fault injection bits (`crate::scada::FAULT_*`, 0..=15).
     pub faults: u16,
-    /// Writes of mode 0 (stop) so far (wraps): a change acknowledges the latched alarms.
+    /// Writes of mode 0 (stop) so far (wraps): a change acknowledges the latched alarms
+    /// and a trip.
     pub stop_writes: u16,
+    /// The protections (holding registers 5..=7).
+    pub protection: ProtectionConfig,
 }
 
 /// What the VFD link last established (see [`crate::vfd::VfdMaster`]).
@@ -344,6 +356,9 @@ pub struct Controller<const NP: usize, const HP: usize, const NF: usize, const H
     vfd_reads_seen: u32,
     /// [`Commands::stop_writes`] last acknowledged.
     stop_writes_seen: u16,
+    protection: Protection,
+    /// The torque is held at 0 % this step (tripped, or not yet restarted).
+    hold: bool,
     virtual_bench: bool,
     out: Published,
 }
@@ -357,6 +372,17 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
         pressure: NarmaxModel<NP, HP>,
         flow: NarmaxModel<NF, HF>,
     ) -> Result<Self, Error> {
+        if !flow.period_ms.is_multiple_of(pressure.period_ms) {
+            // The observer steps with each pressure sample and takes the flow sampled on
+            // that tick: a flow period off the pressure period's multiples would skip flow
+            // readings without a word.
+            return Err(Error::Config(
+                "the flow period must be a whole multiple of the pressure period",
+            ));
+        }
+        if !config.protection.is_valid() {
+            return Err(Error::Config("protection settings out of range"));
+        }
         let pressure_in =
             AnalogInput::new(config.pressure_loop).ok_or(Error::Config("pressure loop"))?;
         let flow_in = AnalogInput::new(config.flow_loop).ok_or(Error::Config("flow loop"))?;
@@ -383,6 +409,8 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             torque_ticks: 0,
             vfd_reads_seen: 0,
             stop_writes_seen: 0,
+            protection: Protection::new(),
+            hold: false,
             virtual_bench: config.virtual_bench,
             out: Published::default(),
         };
@@ -426,8 +454,40 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
         &self.monitor
     }
 
+    /// The trip state.
+    pub fn protection(&self) -> &Protection {
+        &self.protection
+    }
+
+    /// The protections' part of a step: the overspeed check on the speed now, the
+    /// operator's acknowledge, the trip. Returns `true` if the torque is held at 0 %.
+    fn protect(&mut self, inp: &Inputs) -> bool {
+        let c = &inp.commands;
+        let dt = TICK_MS as f32 * 1e-3;
+        // The drive's last good reading (at most one read cycle old), else the observer's
+        // speed: the protection must not depend on a link that may be down.
+        let speed = inp
+            .vfd
+            .readings
+            .map_or(self.out.observer_speed_rpm, |r| r.speed_rpm);
+        self.monitor
+            .set_overspeed_limit_rpm(f32::from(c.protection.overspeed_rpm));
+        self.monitor.check_speed(dt, speed);
+        let ack = c.stop_writes != self.stop_writes_seen;
+        if ack {
+            // SCADA wrote "stop": the operator's acknowledge of latched alarms and a trip,
+            // kept by each until its cause has gone.
+            self.stop_writes_seen = c.stop_writes;
+            self.monitor.acknowledge();
+        }
+        let bits = self.monitor.bits();
+        self.protection
+            .update(&c.protection, dt, bits, c.mode == Mode::Stop, ack)
+    }
+
     fn requested_torque_pct(&mut self, c: &Commands) -> f32 {
-        match c.mode {
+        let mode = if self.hold { Mode::Stop } else { c.mode };
+        match mode {
             Mode::Stop => {
                 self.profile = None;
                 0.0
@@ -480,24 +540,18 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             flow_fault: self.flow_in.faulted(),
             vfd_link_alarm: inp.vfd.link_alarm,
         });
-        if inp.commands.stop_writes != self.stop_writes_seen {
-            // SCADA wrote "stop": the operator's reset of latched alarms whose cause is gone.
-            self.stop_writes_seen = inp.commands.stop_writes;
-            self.monitor.acknowledge();
-        }
-        let alarms = self.monitor.bits();
         let o = &mut self.out;
         o.observer_speed_rpm = e.speed_rpm;
         o.observer_flow_lps = e.flow_lps;
         o.observer_valve_k2 = e.valve_k2;
         o.observer_flow_sd_lps = e.flow_sd_lps;
-        o.alarms = alarms;
     }
 
     /// One millisecond (see the module docs).
     pub fn step(&mut self, inp: &Inputs) -> Outputs {
         let now = self.t_ms;
         let (take_p, take_q) = self.samples_due();
+        self.hold = self.protect(inp);
         let requested = self.requested_torque_pct(&inp.commands);
         let u = inp.vfd.applied_torque_pct(requested);
         self.torque_sum += u;
@@ -575,19 +629,23 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
         let blind = inp.vfd.readings.is_none();
         let readings = inp.vfd.readings.unwrap_or_default();
         let o = &mut self.out;
+        o.alarms = self.monitor.bits();
+        o.trip_causes = self.protection.causes();
         o.status = Status {
-            running: inp.commands.mode != Mode::Stop,
+            running: inp.commands.mode != Mode::Stop && !self.hold,
             any_alarm: !link_ok
                 || blind
                 || p_fault
                 || q_fault
                 || self.model_fault
+                || self.protection.tripped()
                 || o.alarms & !model_core::monitor::LOAD_CHANGED != 0,
             extrapolating: self.wb_extrapolating || self.nx_clamped.iter().any(|&c| c),
             vfd_link_ok: link_ok,
             pressure_fault: p_fault,
             flow_fault: q_fault,
             vfd_readings_invalid: blind,
+            tripped: self.protection.tripped(),
         };
         o.torque_pct = u;
         o.vfd_speed_rpm = readings.speed_rpm;

@@ -9,6 +9,7 @@
 //! - [`rtu`]: RTU framing by silence and an RS-485 port on the embedded-hal traits;
 //! - [`control`]: the real-time core, stepped every 1 ms, that ties the inputs to the
 //!   white-box and NARMAX models, the observer and the alarms;
+//! - [`protect`]: the protections that trip the torque to 0 % (dry run, overspeed, no flow);
 //! - [`link`]: the SCADA server and the VFD master that run apart from the core;
 //! - [`mod@bench`]: the virtual bench that stands in for the real one (QEMU, host tests).
 #![cfg_attr(not(test), no_std)]
@@ -20,6 +21,7 @@ pub mod bench;
 pub mod control;
 pub mod link;
 pub mod modbus;
+pub mod protect;
 pub mod rtu;
 pub mod scada;
 pub mod vfd;

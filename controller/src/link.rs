@@ -33,6 +33,10 @@ impl ScadaLink {
         slave.mode = config.initial_mode;
         slave.setpoint = config.initial_setpoint;
         slave.arithmetic = config.initial_arithmetic;
+        if !config.protection.is_valid() {
+            return Err(Error::Config("protection settings out of range"));
+        }
+        slave.protection = config.protection;
         if config.virtual_bench {
             slave = slave.with_virtual_bench();
         }
@@ -57,6 +61,7 @@ impl ScadaLink {
             valve_permille: s.valve_permille,
             faults: s.faults,
             stop_writes: s.stop_writes,
+            protection: s.protection,
         }
     }
 

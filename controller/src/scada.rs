@@ -2,7 +2,7 @@
 //!
 //! | input register (FC 04) | meaning | unit |
 //! |---|---|---|
-//! | 0 | status bits: 0 running, 1 any alarm, 2 model extrapolating, 3 VFD link ok (the torque reference is delivered), 4 pressure transmitter fault, 5 flow transmitter fault, 6 VFD readings invalid (reads fail: registers 14-16 read 0) | |
+//! | 0 | status bits: 0 running (commanded to run and not held at 0 % by a trip), 1 any alarm, 2 model extrapolating, 3 VFD link ok (the torque reference is delivered), 4 pressure transmitter fault, 5 flow transmitter fault, 6 VFD readings invalid (reads fail: registers 14-16 read 0), 7 tripped (the torque is held at 0 %: [`crate::protect`]), 8 saturated (a value in this map is beyond its register's range and reads as the range's end) | |
 //! | 1 | applied torque reference | 0.01 % |
 //! | 2 | measured pressure | 0.001 mca, signed |
 //! | 3 | measured flow | 0.01 l/s |
@@ -22,9 +22,12 @@
 //! | 17 | uptime (wraps) | s |
 //! | 18 | observer speed | 0.1 rpm |
 //! | 19 | observer flow | 0.01 l/s |
-//! | 20 | observer valve coefficient k2 (0.1082 → 10820) | 1e-5 |
-//! | 21 | alarm bits ([`model_core::monitor`]): 0 pressure transmitter, 1 flow transmitter, 2 VFD link, 3 dry run, 4 no flow, 5 end of curve, 6 load changed, 7 model residual | |
+//! | 20 | observer valve coefficient k2 (0.1082 → 10820; saturates at 0.65535, see 25) | 1e-5 |
+//! | 21 | alarm bits ([`model_core::monitor`]): 0 pressure transmitter, 1 flow transmitter, 2 VFD link, 3 dry run, 4 no flow, 5 end of curve, 6 load changed, 7 model residual, 8 overspeed | |
 //! | 22 | observer flow standard deviation | 0.01 l/s |
+//! | 23 | trip causes: the alarm bits (as 21) that tripped the controller; 0 when not tripped | |
+//! | 24 | VFD actual speed, as 14 in whole rpm (±32 767 rpm; 14 saturates at ±3 276.7) | rpm, signed |
+//! | 25 | observer valve coefficient k2, as 20 in 1e-4 (the observer's whole 0.02..1) | 1e-4 |
 //!
 //! | holding register (FC 03, 06, 16) | meaning | range |
 //! |---|---|---|
@@ -33,9 +36,13 @@
 //! | 2 | NARMAX arithmetic: 0 f32, 1 fixed point | 0..=1 |
 //! | 3 | virtual bench only: its valve, k2 in 0.1 % of nominal (1000 = nominal) | 500..=2000 |
 //! | 4 | virtual bench only: fault injection bits: 0 dry run, 1 pressure transmitter at 2 mA, 2 flow transmitter at 2 mA, 3 VFD link cut | 0..=15 |
+//! | 5 | overspeed limit, rpm (default 1925: 110 % of the nominal 1 750) | 100..=4000 |
+//! | 6 | what trips ([`crate::protect`]): bit 0 dry run, bit 1 overspeed, bit 2 no flow; 1 trips to 0 %, 0 warns (default 3) | 0..=7 |
+//! | 7 | no-flow trip delay: how long the no-flow alarm stands before it trips, if bit 2 of 6 is set (default 30) | 1..=3600 s |
 //!
 //! Holding registers 3 and 4 exist only with a virtual bench ([`ScadaSlave::with_virtual_bench`]):
-//! on a board without one they answer exception 02 like any address outside the map.
+//! on a board without one they answer exception 02 like any address outside the map, and so
+//! does a read or write whose range covers them.
 //!
 //! Exceptions as the Modbus spec says: 01 illegal function (anything but 03, 04, 06, 16, whatever
 //! its fields),
@@ -48,13 +55,14 @@
 //! which gives the silences and the exceptions above (and works around rmodbus's defects).
 
 use crate::modbus::{serve, signed_register, unsigned_register, Exception, Frame, RegisterMap};
+use crate::protect::{ProtectionConfig, NO_FLOW_TRIP_RANGE_S, OVERSPEED_RANGE_RPM, TRIP_ALL};
 
 /// Input registers.
-pub const INPUT_REGISTERS: usize = 23;
-/// Holding registers with a virtual bench (3 without).
-pub const HOLDING_REGISTERS: usize = 5;
-/// Holding registers on a board without a virtual bench.
-pub const BOARD_HOLDING_REGISTERS: usize = 3;
+pub const INPUT_REGISTERS: usize = 26;
+/// Holding registers (0..=7; 3 and 4 only with a virtual bench).
+pub const HOLDING_REGISTERS: usize = 8;
+/// The holding registers that exist only with a virtual bench.
+pub const BENCH_HOLDING_REGISTERS: core::ops::Range<usize> = 3..5;
 /// Virtual bench valve, 0.1 % of nominal k2: nominal.
 pub const VALVE_NOMINAL_PERMILLE: u16 = 1000;
 /// Virtual bench valve: the range, 0.1 % of nominal k2.
@@ -152,6 +160,8 @@ pub struct Status {
     /// Bit 6: the drive's readings are invalid (its reads fail, or the link is down): the
     /// controller is blind to the drive, and input registers 14-16 read 0.
     pub vfd_readings_invalid: bool,
+    /// Bit 7: tripped: a protection holds the torque at 0 % ([`crate::protect`]).
+    pub tripped: bool,
 }
 
 impl Status {
@@ -165,6 +175,7 @@ impl Status {
             self.pressure_fault,
             self.flow_fault,
             self.vfd_readings_invalid,
+            self.tripped,
         ]
         .iter()
         .enumerate()
@@ -222,36 +233,71 @@ pub struct Published {
     pub alarms: u16,
     /// Observer flow standard deviation, l/s.
     pub observer_flow_sd_lps: f32,
+    /// The alarm bits that tripped the controller (0: not tripped).
+    pub trip_causes: u16,
+}
+
+/// Scales values into registers and remembers whether one did not fit (status bit 8).
+#[derive(Default)]
+struct Fit {
+    saturated: bool,
+}
+
+impl Fit {
+    /// [`unsigned_register`], noting a finite value outside 0..=`max` counts.
+    fn unsigned(&mut self, x: f32, scale: f32, max: u16) -> u16 {
+        let v = x * scale;
+        self.saturated |= !v.is_nan() && !(v > -0.5 && v < f32::from(max) + 0.5);
+        unsigned_register(x, scale).min(max)
+    }
+
+    /// [`signed_register`], noting a finite value outside −32 768..=32 767 counts.
+    fn signed(&mut self, x: f32, scale: f32) -> u16 {
+        let v = x * scale;
+        self.saturated |= !v.is_nan() && !(v > -32768.5 && v < 32767.5);
+        signed_register(x, scale)
+    }
 }
 
 impl Published {
-    /// The input registers.
+    /// The input registers. A value beyond its register's range reads as the range's end,
+    /// and sets status bit 8 (saturated).
     pub fn registers(&self) -> [u16; INPUT_REGISTERS] {
-        [
-            self.status.bits(),
-            unsigned_register(self.torque_pct, 100.0).min(SETPOINT_MAX),
-            signed_register(self.pressure_mca, 1000.0),
-            unsigned_register(self.flow_lps, 100.0),
-            signed_register(self.whitebox_pressure_mca, 1000.0),
-            unsigned_register(self.whitebox_flow_lps, 100.0),
-            unsigned_register(self.whitebox_speed_rpm, 10.0),
-            signed_register(self.narmax_pressure_mca, 1000.0),
-            unsigned_register(self.narmax_flow_lps, 100.0),
+        let mut f = Fit::default();
+        let u = u16::MAX;
+        let mut r = [
+            0,
+            f.unsigned(self.torque_pct, 100.0, SETPOINT_MAX),
+            f.signed(self.pressure_mca, 1000.0),
+            f.unsigned(self.flow_lps, 100.0, u),
+            f.signed(self.whitebox_pressure_mca, 1000.0),
+            f.unsigned(self.whitebox_flow_lps, 100.0, u),
+            f.unsigned(self.whitebox_speed_rpm, 10.0, u),
+            f.signed(self.narmax_pressure_mca, 1000.0),
+            f.unsigned(self.narmax_flow_lps, 100.0, u),
             self.sample,
-            signed_register(self.whitebox_pressure_residual_mca, 1000.0),
-            signed_register(self.whitebox_flow_residual_lps, 100.0),
-            signed_register(self.narmax_pressure_residual_mca, 1000.0),
-            signed_register(self.narmax_flow_residual_lps, 100.0),
-            signed_register(self.vfd_speed_rpm, 10.0),
-            signed_register(self.vfd_torque_pct, 100.0),
+            f.signed(self.whitebox_pressure_residual_mca, 1000.0),
+            f.signed(self.whitebox_flow_residual_lps, 100.0),
+            f.signed(self.narmax_pressure_residual_mca, 1000.0),
+            f.signed(self.narmax_flow_residual_lps, 100.0),
+            f.signed(self.vfd_speed_rpm, 10.0),
+            f.signed(self.vfd_torque_pct, 100.0),
             self.vfd_status,
             self.uptime_s,
-            unsigned_register(self.observer_speed_rpm, 10.0),
-            unsigned_register(self.observer_flow_lps, 100.0),
-            unsigned_register(self.observer_valve_k2, 1e5),
+            f.unsigned(self.observer_speed_rpm, 10.0, u),
+            f.unsigned(self.observer_flow_lps, 100.0, u),
+            f.unsigned(self.observer_valve_k2, 1e5, u),
             self.alarms,
-            unsigned_register(self.observer_flow_sd_lps, 100.0),
-        ]
+            f.unsigned(self.observer_flow_sd_lps, 100.0, u),
+            self.trip_causes,
+            0,
+            0,
+        ];
+        // The wide twins of 14 and 20: a saturated twin still reads the wide value.
+        r[24] = signed_register(self.vfd_speed_rpm, 1.0);
+        r[25] = unsigned_register(self.observer_valve_k2, 1e4);
+        r[0] = self.status.bits() | (u16::from(f.saturated) << 8);
+        r
     }
 }
 
@@ -273,6 +319,8 @@ pub struct ScadaSlave {
     pub faults: u16,
     /// Writes of mode 0 (stop) so far (wraps): each acknowledges the latched alarms.
     pub stop_writes: u16,
+    /// The protections (holding registers 5..=7).
+    pub protection: ProtectionConfig,
 }
 
 impl ScadaSlave {
@@ -287,6 +335,7 @@ impl ScadaSlave {
             valve_permille: VALVE_NOMINAL_PERMILLE,
             faults: 0,
             stop_writes: 0,
+            protection: ProtectionConfig::DEFAULT,
         })
     }
 
@@ -296,7 +345,7 @@ impl ScadaSlave {
         self
     }
 
-    /// The holding registers (the last two exist only with a virtual bench).
+    /// The holding registers (3 and 4 exist only with a virtual bench).
     pub fn holding(&self) -> [u16; HOLDING_REGISTERS] {
         [
             self.setpoint,
@@ -304,15 +353,19 @@ impl ScadaSlave {
             self.arithmetic as u16,
             self.valve_permille,
             self.faults,
+            self.protection.overspeed_rpm,
+            self.protection.trip_on,
+            self.protection.no_flow_trip_s,
         ]
     }
 
-    fn holding_count(&self) -> usize {
-        if self.virtual_bench {
-            HOLDING_REGISTERS
-        } else {
-            BOARD_HOLDING_REGISTERS
-        }
+    /// The holding registers `start..start + n` all exist on this board.
+    fn holding_exist(&self, start: usize, n: usize) -> bool {
+        let end = start + n;
+        end <= HOLDING_REGISTERS
+            && (self.virtual_bench
+                || end <= BENCH_HOLDING_REGISTERS.start
+                || start >= BENCH_HOLDING_REGISTERS.end)
     }
 
     /// Handles one received RTU frame (the bytes between two silences), `inputs` being the
@@ -339,7 +392,7 @@ impl ScadaSlave {
     /// Applies a write of `values` from `address` on, all or nothing.
     fn write_words(&mut self, address: u16, values: &[u16]) -> Result<(), Exception> {
         let start = usize::from(address);
-        if start + values.len() > self.holding_count() {
+        if !self.holding_exist(start, values.len()) {
             return Err(Exception::IllegalDataAddress);
         }
         let mut next = *self;
@@ -361,6 +414,9 @@ impl ScadaSlave {
                 }
                 3 if VALVE_RANGE_PERMILLE.contains(&v) => next.valve_permille = v,
                 4 if v <= 15 => next.faults = v,
+                5 if OVERSPEED_RANGE_RPM.contains(&v) => next.protection.overspeed_rpm = v,
+                6 if v & !TRIP_ALL == 0 => next.protection.trip_on = v,
+                7 if NO_FLOW_TRIP_RANGE_S.contains(&v) => next.protection.no_flow_trip_s = v,
                 _ => return Err(Exception::IllegalDataValue),
             }
         }
@@ -381,8 +437,10 @@ impl RegisterMap for ScadaMap<'_> {
     }
 
     fn read_holding_registers(&self, address: u16, out: &mut [u16]) -> Result<(), Exception> {
-        let holding = self.slave.holding();
-        read_words(&holding[..self.slave.holding_count()], address, out)
+        if !self.slave.holding_exist(usize::from(address), out.len()) {
+            return Err(Exception::IllegalDataAddress);
+        }
+        read_words(&self.slave.holding(), address, out)
     }
 
     fn write_holding_registers(&mut self, address: u16, values: &[u16]) -> Result<(), Exception> {
@@ -470,7 +528,92 @@ mod tests {
         assert_eq!(exception(&mut s, &[1, 6, 0, 4, 0, 16]), 3, "fault bit 4");
         ask(&mut s, &frame(&[1, 6, 0, 4, 0, 0b1010])).unwrap();
         assert_eq!(s.faults, 0b1010);
-        assert_eq!(exception(&mut s, &[1, 3, 0, 4, 0, 2]), 2, "past the map");
+        assert_eq!(exception(&mut s, &[1, 3, 0, 7, 0, 2]), 2, "past the map");
+    }
+
+    #[test]
+    fn protection_registers_on_every_board_with_their_ranges() {
+        use crate::protect::ProtectionConfig;
+        for mut s in [
+            ScadaSlave::new(1).unwrap(),
+            ScadaSlave::new(1).unwrap().with_virtual_bench(),
+        ] {
+            let r = ask(&mut s, &frame(&[1, 3, 0, 5, 0, 3])).unwrap();
+            assert_eq!(
+                &r[..9],
+                &[1, 3, 6, 0x07, 0x85, 0, 3, 0, 30],
+                "1925 rpm, 3, 30 s"
+            );
+            let w = frame(&[1, 16, 0, 5, 0, 3, 6, 0x03, 0xE8, 0, 7, 0, 5]);
+            assert_eq!(&ask(&mut s, &w).unwrap()[..6], &[1, 16, 0, 5, 0, 3]);
+            assert_eq!(
+                s.protection,
+                ProtectionConfig {
+                    overspeed_rpm: 1000,
+                    trip_on: 7,
+                    no_flow_trip_s: 5
+                }
+            );
+            for (reg, bad) in [(5u8, 99u16), (5, 4001), (6, 8), (7, 0), (7, 3601)] {
+                let [hi, lo] = bad.to_be_bytes();
+                assert_eq!(exception(&mut s, &[1, 6, 0, reg, hi, lo]), 3, "{reg}={bad}");
+            }
+            assert_eq!(
+                s.protection.overspeed_rpm, 1000,
+                "a refused write changes nothing"
+            );
+        }
+        // On a board, a range over the bench's registers (3, 4) is 02; on either side, fine.
+        let mut board = ScadaSlave::new(1).unwrap();
+        assert_eq!(exception(&mut board, &[1, 3, 0, 0, 0, 8]), 2);
+        assert_eq!(exception(&mut board, &[1, 3, 0, 2, 0, 4]), 2);
+        assert_eq!(
+            exception(&mut board, &[1, 16, 0, 4, 0, 2, 4, 0, 0, 0x03, 0xE8]),
+            2
+        );
+        assert_eq!(
+            &ask(&mut board, &frame(&[1, 3, 0, 0, 0, 3])).unwrap()[..3],
+            &[1, 3, 6]
+        );
+        let mut bench = ScadaSlave::new(1).unwrap().with_virtual_bench();
+        assert_eq!(
+            &ask(&mut bench, &frame(&[1, 3, 0, 0, 0, 8])).unwrap()[..3],
+            &[1, 3, 16]
+        );
+    }
+
+    /// Regression (defect 4 of the protection issue): register 14 held a runaway drive at
+    /// 3 276.7 rpm and register 20 a k2 above 0.65535 at 0.65535, with nothing to say so.
+    #[test]
+    fn saturation_is_flagged_and_the_wide_registers_hold_the_value() {
+        let ok = Published {
+            vfd_speed_rpm: 1750.0,
+            observer_valve_k2: 0.1082,
+            ..Published::default()
+        };
+        let r = ok.registers();
+        assert_eq!(r[0] & 1 << 8, 0);
+        assert_eq!((r[14], r[24], r[20], r[25]), (17500, 1750, 10820, 1082));
+        let fast = Published {
+            vfd_speed_rpm: 5123.4,
+            ..ok
+        };
+        let r = fast.registers();
+        assert_eq!(r[0] & 1 << 8, 1 << 8, "saturated");
+        assert_eq!((r[14], r[24]), (32767, 5123));
+        let closed = Published {
+            observer_valve_k2: 0.9,
+            ..ok
+        };
+        let r = closed.registers();
+        assert_eq!(r[0] & 1 << 8, 1 << 8);
+        assert_eq!((r[20], r[25]), (65535, 9000));
+        let back = Published {
+            vfd_speed_rpm: -3300.0,
+            ..ok
+        };
+        assert_eq!(back.registers()[0] & 1 << 8, 1 << 8, "negative too");
+        assert_eq!(back.registers()[24] as i16, -3300);
     }
 
     #[test]
@@ -487,17 +630,17 @@ mod tests {
             "unknown function"
         );
         assert_eq!(
-            exception(&mut s, &[1, 4, 0, 22, 0, 2]),
+            exception(&mut s, &[1, 4, 0, 25, 0, 2]),
             2,
             "past the input map"
         );
         assert_eq!(
             exception(&mut s, &[1, 3, 0, 3, 0, 1]),
             2,
-            "past the holding map"
+            "the bench's holding registers on a board"
         );
         assert_eq!(
-            exception(&mut s, &[1, 6, 0, 5, 0, 1]),
+            exception(&mut s, &[1, 6, 0, 8, 0, 1]),
             2,
             "write past the map"
         );
@@ -593,7 +736,7 @@ mod tests {
             ..Published::default()
         };
         let r = p.registers();
-        assert_eq!(r[0], 0b10_0001);
+        assert_eq!(r[0], 0b1_0010_0001, "saturated: 150 % and 1e9 mca");
         assert_eq!(r[1], 10_000);
         assert_eq!(r[2] as i16, -250);
         assert_eq!(r[3], 0);

@@ -11,10 +11,14 @@
 //! | 5 | end of curve (run-out) | estimated or measured flow above `threshold` l/s (the fitted range ends at 27.8) | no |
 //! | 6 | load changed | k2 more than `threshold` (a fraction) from its reference, above `min_speed_rpm` (k2 is poorly observed with little flow) | no (informational) |
 //! | 7 | model residual | the innovations' normalised square (each capped at `residual_nis_cap`), averaged over `residual_tau_s`, above `threshold` | no |
+//! | 8 | overspeed | the speed (the drive's reading, else the estimate's) above `threshold` rpm, checked by [`Monitor::check_speed`] on every call (the controller: every 1 ms) | yes |
 //!
-//! A latched alarm stays after its cause has gone until [`Monitor::acknowledge`]; an
-//! unlatched one clears once its clearing condition (threshold moved by the hysteresis) has
-//! held for its clear delay.
+//! An unlatched alarm clears once its clearing condition (threshold moved by the hysteresis)
+//! has held for its clear delay. A latched one stays after its cause has gone until
+//! [`Monitor::acknowledge`], and then clears once its clearing condition has held for its
+//! clear delay: at once if it already had when the acknowledge came, else as soon as it has
+//! (an acknowledge given while the cause stands is kept until the cause has gone, not lost).
+//! An alarm raised again after it cleared needs a new acknowledge.
 
 use crate::equations::{electromagnetic_torque_pct, load_torque_pct};
 use crate::observer::{clamp_torque, Estimate, Use};
@@ -37,6 +41,12 @@ pub const END_OF_CURVE: u16 = 1 << 5;
 pub const LOAD_CHANGED: u16 = 1 << 6;
 /// Bit of model residual.
 pub const MODEL_RESIDUAL: u16 = 1 << 7;
+/// Bit of overspeed.
+pub const OVERSPEED: u16 = 1 << 8;
+/// Alarms in the bit set (bits 0..=8).
+pub const ALARMS: usize = 9;
+/// The motor's nominal speed, rpm: the paper's 58.3π rad/s, rounded to the drive's 1 750.
+pub const NOMINAL_SPEED_RPM: f64 = 1750.0;
 
 /// One alarm's rule. The threshold's unit is the alarm's (see the module table); the
 /// hysteresis moves the threshold for clearing, away from the raising side.
@@ -84,6 +94,9 @@ pub struct MonitorConfig<T> {
     /// Raise and clear delays of the transmitter and link bits, s: 0 (their own checks
     /// already wait).
     pub pass_through_s: T,
+    /// Speed above which the motor runs over speed, rpm: 110 % of the nominal 1 750 rpm
+    /// (1 925), clear 100 rpm below it after 1 s; raised at once; latched.
+    pub overspeed: AlarmConfig<T>,
 }
 
 impl<T: Real> MonitorConfig<T> {
@@ -109,6 +122,7 @@ impl<T: Real> MonitorConfig<T> {
             min_speed_rpm: f(500.0),
             k2_reference: BenchParams::<T>::paper().valve_k2,
             pass_through_s: T::ZERO,
+            overspeed: rule(NOMINAL_SPEED_RPM * 11.0 / 10.0, 100.0, 0.0, 1.0, true),
         }
     }
 }
@@ -145,29 +159,52 @@ struct Timer<T> {
     clear_now: bool,
     /// The alarm is latched (as configured at the last update).
     latched: bool,
+    /// The clear delay at the last update, s.
+    clear_s: T,
+    /// An acknowledge waits for the cause to go (latched alarms).
+    ack: bool,
 }
 
 impl<T: Real> Timer<T> {
-    /// One update: `raise`/`clear` are the conditions (with the hysteresis applied). Not
-    /// inlined: eight copies cost the MCU image ≈ 1 KB.
+    const IDLE: Self = Self {
+        active: false,
+        held_s: T::ZERO,
+        clear_now: true,
+        latched: false,
+        clear_s: T::ZERO,
+        ack: false,
+    };
+
+    /// One update: `raise`/`clear` are the conditions (with the hysteresis applied). While
+    /// raised, `held_s` is how long the clearing condition has held, latched or not; a
+    /// latched alarm clears on it only once acknowledged. Not inlined: nine copies cost the
+    /// MCU image ≈ 1 KB.
     #[inline(never)]
     fn update(&mut self, dt: T, raise: bool, clear: bool, raise_s: T, clear_s: T, latched: bool) {
         self.clear_now = clear;
         self.latched = latched;
-        let want = if self.active {
-            clear && !latched
-        } else {
-            raise
-        };
+        self.clear_s = clear_s;
+        let want = if self.active { clear } else { raise };
         if want {
             self.held_s += dt;
-            let needed = if self.active { clear_s } else { raise_s };
-            if self.held_s >= needed {
-                self.active = !self.active;
-                self.held_s = T::ZERO;
-            }
         } else {
             self.held_s = T::ZERO;
+        }
+        self.settle(raise_s, raise);
+    }
+
+    /// Toggles the alarm if its condition has held long enough (and, to clear a latched
+    /// alarm, it is acknowledged).
+    fn settle(&mut self, raise_s: T, raise: bool) {
+        let (needed, allowed) = if self.active {
+            (self.clear_s, self.clear_now && (!self.latched || self.ack))
+        } else {
+            (raise_s, raise)
+        };
+        if allowed && self.held_s >= needed {
+            self.active = !self.active;
+            self.held_s = T::ZERO;
+            self.ack = false;
         }
     }
 }
@@ -176,9 +213,12 @@ impl<T: Real> Timer<T> {
 #[derive(Debug, Clone, PartialEq)]
 pub struct Monitor<T> {
     cfg: MonitorConfig<T>,
-    timers: [Timer<T>; 8],
+    timers: [Timer<T>; ALARMS],
     nis_avg: T,
+    /// The estimate's speed at the last update, rpm.
     last_speed: Option<T>,
+    /// The drive's last speed reading, rpm, and its age, s.
+    last_drive_speed: Option<(T, T)>,
     /// Last measured flow and its age, s.
     last_flow: Option<(T, T)>,
     accel: T,
@@ -193,14 +233,10 @@ impl<T: Real> Monitor<T> {
         let par = BenchParams::<T>::paper();
         Self {
             cfg: config,
-            timers: [Timer {
-                active: false,
-                held_s: T::ZERO,
-                clear_now: true,
-                latched: false,
-            }; 8],
+            timers: [Timer::IDLE; ALARMS],
             nis_avg: T::ZERO,
             last_speed: None,
+            last_drive_speed: None,
             last_flow: None,
             accel: par.accel_rpm_per_s_per_pct(),
             gamma: par.gamma,
@@ -221,15 +257,55 @@ impl<T: Real> Monitor<T> {
             .fold(0, |acc, (i, t)| acc | (u16::from(t.active) << i))
     }
 
-    /// Clears the latched alarms whose cause has gone (their clearing condition held at the
-    /// last update); an alarm whose cause stands stays. Unlatched alarms are not touched.
+    /// The operator's acknowledge of the latched alarms raised now: each clears at once if
+    /// its cause has gone (its clearing condition has held for its clear delay), else as
+    /// soon as it has; the acknowledge is kept until then. Unlatched alarms are not touched.
     pub fn acknowledge(&mut self) {
         for t in self.timers.iter_mut() {
-            if t.latched && t.active && t.clear_now {
-                t.active = false;
-                t.held_s = T::ZERO;
+            if t.latched && t.active {
+                t.ack = true;
+                t.settle(T::ZERO, false);
             }
         }
+    }
+
+    /// Latched alarms raised now that have an acknowledge waiting for their cause to go.
+    pub fn acknowledge_pending(&self) -> u16 {
+        self.timers
+            .iter()
+            .enumerate()
+            .fold(0, |acc, (i, t)| acc | (u16::from(t.active && t.ack) << i))
+    }
+
+    /// Sets the overspeed limit, rpm (finite and > 0; other values are ignored).
+    pub fn set_overspeed_limit_rpm(&mut self, limit_rpm: T) {
+        if limit_rpm.is_finite() && limit_rpm > T::ZERO {
+            self.cfg.overspeed.threshold = limit_rpm;
+        }
+    }
+
+    /// The overspeed check, on its own so that it can run more often than [`Self::update`]
+    /// (the controller: every 1 ms): `speed_rpm` (the drive's reading, else the estimate's)
+    /// against the limit, `dt_s` since the last call. Returns the alarm bits. A speed that is
+    /// not finite is no reading: the timers hold.
+    pub fn check_speed(&mut self, dt_s: T, speed_rpm: T) -> u16 {
+        if speed_rpm.is_finite() {
+            let o = self.cfg.overspeed;
+            let dt = if dt_s.is_finite() && dt_s > T::ZERO {
+                dt_s
+            } else {
+                T::ZERO
+            };
+            self.timers[8].update(
+                dt,
+                speed_rpm > o.threshold,
+                speed_rpm < o.threshold - o.hysteresis,
+                o.raise_s,
+                o.clear_s,
+                o.latched,
+            );
+        }
+        self.bits()
     }
 
     /// One update; returns the alarm bits.
@@ -247,16 +323,24 @@ impl<T: Real> Monitor<T> {
         self.timers[2].update(dt, m.vfd_link_alarm, !m.vfd_link_alarm, pass, pass, false);
 
         // Dry run: the load the motion shows against what the (wet) pump curve needs.
+        // The acceleration from two speeds of one source: the drive's readings (however far
+        // apart), else the estimate's; a switch between the two is not an acceleration.
         let accel = self.accel;
-        let speed = match m.vfd_speed_rpm {
-            Some(w) if w.is_finite() => w,
-            _ => e.speed_rpm,
+        let drive = m.vfd_speed_rpm.filter(|w| w.is_finite());
+        let (speed, rate) = match (drive, self.last_drive_speed) {
+            (Some(w), Some((w0, age))) if age + dt > T::ZERO => (w, (w - w0) / (age + dt)),
+            (Some(w), _) => (w, T::ZERO),
+            (None, _) => match self.last_speed {
+                Some(w0) if dt > T::ZERO => (e.speed_rpm, (e.speed_rpm - w0) / dt),
+                _ => (e.speed_rpm, T::ZERO),
+            },
         };
-        let rate = match self.last_speed {
-            Some(w) if dt > T::ZERO => (speed - w) / dt,
-            _ => T::ZERO,
+        self.last_speed = Some(e.speed_rpm);
+        self.last_drive_speed = match (drive, self.last_drive_speed) {
+            (Some(w), _) => Some((w, T::ZERO)),
+            (None, Some((w0, age))) if age + dt <= T::ONE => Some((w0, age + dt)),
+            _ => None,
         };
-        self.last_speed = Some(speed);
         self.last_flow = match (m.measured_flow_lps, self.last_flow) {
             (Some(q), _) if q.is_finite() => Some((q.max(T::ZERO), T::ZERO)),
             (_, Some((q, age))) if age + dt <= T::ONE => Some((q, age + dt)),
@@ -551,23 +635,54 @@ mod tests {
             mon.update(&ok);
         }
         assert!(mon.bits() & DRY_RUN != 0, "latched");
-        let mut stands = input(e);
+        // Cured for 5 s (more than the 2 s clear delay): one acknowledge clears it at once.
+        let mut cured = mon.clone();
+        cured.acknowledge();
+        assert_eq!(
+            cured.bits() & DRY_RUN,
+            0,
+            "acknowledged with the cause gone"
+        );
+        // The cause back: an acknowledge does not clear it, but is kept, not lost...
+        let stands = input(e);
         mon.update(&stands);
         mon.acknowledge();
         assert!(
             mon.bits() & DRY_RUN != 0,
             "not acknowledged while the cause stands"
         );
-        stands.vfd_torque_pct = None;
-        mon.update(&stands);
+        assert_eq!(mon.acknowledge_pending(), DRY_RUN);
+        for _ in 0..20 {
+            mon.update(&stands);
+        }
+        assert!(mon.bits() & DRY_RUN != 0, "still dry: still raised");
+        // ...and clears the alarm once the cause has gone for its clear delay, 2 s.
+        let mut t = 0.0;
+        while mon.bits() & DRY_RUN != 0 {
+            mon.update(&ok);
+            t += 0.05;
+            assert!(t < 2.2, "not cleared {t} s after the cause went");
+        }
+        assert!(t >= 1.95, "cleared after {t} s, before its 2 s delay");
+        assert_eq!(mon.acknowledge_pending(), 0);
+        // Raised again: the old acknowledge is spent, a new one is needed.
+        for _ in 0..60 {
+            mon.update(&stands);
+        }
+        assert!(mon.bits() & DRY_RUN != 0);
+        for _ in 0..100 {
+            mon.update(&ok);
+        }
+        assert!(mon.bits() & DRY_RUN != 0, "latched again, no acknowledge");
         mon.acknowledge();
-        assert_eq!(mon.bits() & DRY_RUN, 0, "acknowledged with the cause gone");
+        assert_eq!(mon.bits() & DRY_RUN, 0);
         // Load changed is not latched: it clears by itself.
         e.valve_k2 *= 1.3;
         for _ in 0..40 {
             mon.update(&input(e));
         }
-        let mut back = ok;
+        let mut back = input(e);
+        back.vfd_torque_pct = None;
         back.estimate.valve_k2 = e.valve_k2 / 1.3;
         mon.update(&input(e));
         assert!(mon.bits() & LOAD_CHANGED != 0);
@@ -575,5 +690,85 @@ mod tests {
             mon.update(&back);
         }
         assert_eq!(mon.bits() & LOAD_CHANGED, 0);
+    }
+    #[test]
+    fn overspeed_raises_at_once_latches_and_clears_below_the_limit_when_acknowledged() {
+        let mut mon = Monitor::new(MonitorConfig::<f64>::paper());
+        assert_eq!(
+            mon.config().overspeed.threshold,
+            1925.0,
+            "110 % of 1 750 rpm"
+        );
+        for _ in 0..1000 {
+            assert_eq!(mon.check_speed(1e-3, 1900.0), 0);
+        }
+        assert_eq!(
+            mon.check_speed(1e-3, 1926.0),
+            OVERSPEED,
+            "the first reading over"
+        );
+        assert_eq!(
+            mon.check_speed(1e-3, f64::NAN),
+            OVERSPEED,
+            "no reading: held"
+        );
+        for _ in 0..3000 {
+            mon.check_speed(1e-3, 0.0);
+        }
+        assert_eq!(mon.bits(), OVERSPEED, "latched");
+        mon.acknowledge();
+        assert_eq!(mon.bits(), 0, "below the limit for 3 s: acknowledged");
+        mon.set_overspeed_limit_rpm(1000.0);
+        mon.check_speed(1e-3, 1001.0);
+        assert_eq!(mon.bits(), OVERSPEED, "the limit can be set");
+        mon.acknowledge();
+        for _ in 0..999 {
+            mon.check_speed(1e-3, 950.0);
+        }
+        assert_eq!(mon.bits(), OVERSPEED, "within the 100 rpm hysteresis");
+        for _ in 0..1001 {
+            mon.check_speed(1e-3, 899.0);
+        }
+        assert_eq!(
+            mon.bits(),
+            0,
+            "1 s below 900 rpm: the waiting acknowledge clears it"
+        );
+        for bad in [f64::NAN, 0.0, -5.0, f64::INFINITY] {
+            mon.set_overspeed_limit_rpm(bad);
+            assert_eq!(mon.config().overspeed.threshold, 1000.0, "{bad} ignored");
+        }
+    }
+
+    /// Regression (defect 5a of the protection issue): a drive reading missing for one
+    /// update switched the dry-run rule's speed from the drive's to the estimate's, and the
+    /// switch read as an acceleration. A wet pump at a steady 1 300 rpm whose estimate is
+    /// 150 rpm off the drive's reading (a curve off the paper's) must not look dry, however
+    /// the readings come and go.
+    #[test]
+    fn a_missing_drive_reading_is_not_an_acceleration() {
+        let o = Observer::<f64>::new(ObserverConfig::paper(), 50.0).unwrap();
+        let e = o.estimate_now();
+        let drive = e.speed_rpm + 150.0;
+        let mut mon = Monitor::new(MonitorConfig::<f64>::paper());
+        for k in 0..400 {
+            let reading = (k % 7 != 3).then_some(drive);
+            let needed = load_torque_pct(&mon.beta, reading.unwrap_or(e.speed_rpm), e.flow_lps);
+            let bits = mon.update(&MonitorInputs {
+                dt_s: 0.05,
+                estimate: e,
+                torque_ref_pct: 50.0,
+                vfd_torque_pct: Some(needed),
+                vfd_speed_rpm: reading,
+                measured_flow_lps: None,
+                pressure_fault: false,
+                flow_fault: false,
+                vfd_link_alarm: false,
+            });
+            assert_eq!(bits & DRY_RUN, 0, "update {k}: {bits:#x}");
+            // Not even one update reads dry: that would restart the clear delay of a
+            // dry-run alarm waiting for its acknowledge.
+            assert!(mon.timers[3].clear_now, "update {k} reads dry");
+        }
     }
 }

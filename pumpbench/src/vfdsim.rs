@@ -117,7 +117,7 @@ pub fn run(port: &Path, o: &Options) -> Result<(), Failure> {
         if framer.poll(now_us, &mut frame) {
             let values = DriveValues {
                 speed_rpm: bench.signals().speed_rpm,
-                torque_pct: sim.torque_ref_pct(),
+                torque_pct: bench.delivered_torque_pct(),
             };
             if let Some(n) = sim.handle(&frame, &values, &mut answer) {
                 file.write_all(&answer[..n]).map_err(io_err)?;
