@@ -46,6 +46,9 @@ use model_core::{BenchError, BenchState, Scheme, Signals, WhiteBox};
 pub const TICK_MS: u32 = 1;
 /// A log line every this many ms.
 pub const LOG_EVERY_MS: u32 = 1000;
+/// The protections use the drive's speed reading up to this age, ms; older (reads failing),
+/// the observer's speed.
+pub const DRIVE_READING_FRESH_MS: u32 = 100;
 
 /// Configuration of the controller and its links.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -359,6 +362,8 @@ pub struct Controller<const NP: usize, const HP: usize, const NF: usize, const H
     protection: Protection,
     /// The torque is held at 0 % this step (tripped, or not yet restarted).
     hold: bool,
+    /// [`VfdStatus::reads_ok`] seen by the protections, and the step it changed at.
+    protect_reads: (u32, u32),
     virtual_bench: bool,
     out: Published,
 }
@@ -411,6 +416,7 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             stop_writes_seen: 0,
             protection: Protection::new(),
             hold: false,
+            protect_reads: (0, 0),
             virtual_bench: config.virtual_bench,
             out: Published::default(),
         };
@@ -464,12 +470,18 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
     fn protect(&mut self, inp: &Inputs) -> bool {
         let c = &inp.commands;
         let dt = TICK_MS as f32 * 1e-3;
-        // The drive's last good reading (at most one read cycle old), else the observer's
-        // speed: the protection must not depend on a link that may be down.
-        let speed = inp
-            .vfd
-            .readings
-            .map_or(self.out.observer_speed_rpm, |r| r.speed_rpm);
+        // The drive's reading while reads come in (one every 2 VFD cycles, 20 ms by
+        // default), else the observer's speed: the protection must not depend on a link that
+        // may be down, nor sit on a reading that failing reads leave standing (the link
+        // takes 3 failed exchanges, up to ≈ 0.9 s, to call the readings invalid).
+        if inp.vfd.reads_ok != self.protect_reads.0 {
+            self.protect_reads = (inp.vfd.reads_ok, self.t_ms);
+        }
+        let age_ms = self.t_ms.wrapping_sub(self.protect_reads.1);
+        let speed = match inp.vfd.readings {
+            Some(r) if age_ms <= DRIVE_READING_FRESH_MS => r.speed_rpm,
+            _ => self.out.observer_speed_rpm,
+        };
         self.monitor
             .set_overspeed_limit_rpm(f32::from(c.protection.overspeed_rpm));
         self.monitor.check_speed(dt, speed);

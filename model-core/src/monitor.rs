@@ -370,7 +370,11 @@ impl<T: Real> Monitor<T> {
         let k2_ratio = e.valve_k2 / c.k2_reference;
         let spinning = e.speed_rpm > c.min_speed_rpm;
         let raise = spinning && (e.flow_lps < n.threshold || k2_ratio > c.closed_valve_k2_ratio);
-        let clear = !spinning || e.flow_lps > n.threshold + n.hysteresis;
+        // Clearing is the raising condition's opposite, both halves with their margin: a
+        // closed valve whose flow still reads above 1.5 l/s must not clear and re-raise in
+        // turn.
+        let clear = !spinning
+            || (e.flow_lps > n.threshold + n.hysteresis && k2_ratio < c.closed_valve_k2_ratio);
         self.timers[4].update(dt, raise, clear, n.raise_s, n.clear_s, n.latched);
 
         // End of curve: the estimate, or the flow meter where the model cannot follow (a
