@@ -50,6 +50,26 @@ pub const LOG_EVERY_MS: u32 = 1000;
 /// the observer's speed.
 pub const DRIVE_READING_FRESH_MS: u32 = 100;
 
+/// A failed white-box step shows in status bit 1 (any alarm) for this long, ms.
+pub const MODEL_FAULT_SHOWN_MS: u32 = 2000;
+
+/// One 1 ms white-box step with the applied torque `u` (finite, 0..=100 %); `false` if it
+/// failed, which can only mean a diverged state: the step leaves it unchanged, so it would
+/// fail on every step after (the fault latched forever). The model restarts at its steady
+/// state for `u` instead.
+fn step_or_restart(whitebox: &WhiteBox<f32>, state: &mut BenchState<f32>, u: f32) -> bool {
+    if whitebox
+        .step(state, u, TICK_MS as f32 * 1e-3, Scheme::Rk4)
+        .is_ok()
+    {
+        return true;
+    }
+    if let Ok(rest) = whitebox.steady_state(u) {
+        *state = rest;
+    }
+    false
+}
+
 /// Configuration of the controller and its links.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Config {
@@ -347,7 +367,8 @@ pub struct Controller<const NP: usize, const HP: usize, const NF: usize, const H
     profile_seed: u64,
     profile: Option<McuPulses>,
     t_ms: u32,
-    model_fault: bool,
+    /// How long the white-box model's last failed step still shows as an alarm, ms.
+    model_fault_ms: u32,
     wb_extrapolating: bool,
     nx_clamped: [bool; 2],
     observer: Observer<f32>,
@@ -405,7 +426,7 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             profile_seed: config.profile_seed,
             profile: None,
             t_ms: 0,
-            model_fault: false,
+            model_fault_ms: 0,
             wb_extrapolating: false,
             nx_clamped: [false; 2],
             observer,
@@ -628,12 +649,12 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             }
         }
 
-        // The torque is finite and within 0..=100 % (applied_torque_pct), the step fixed: an
-        // error here means a diverged state, which is kept and flagged.
-        self.model_fault |= self
-            .whitebox
-            .step(&mut self.wb, u, TICK_MS as f32 * 1e-3, Scheme::Rk4)
-            .is_err();
+        if step_or_restart(&self.whitebox, &mut self.wb, u) {
+            self.model_fault_ms = self.model_fault_ms.saturating_sub(TICK_MS);
+        } else {
+            self.model_fault_ms = MODEL_FAULT_SHOWN_MS;
+        }
+        let model_fault = self.model_fault_ms > 0;
 
         let link_ok = !inp.vfd.link_alarm;
         let (p_fault, q_fault) = (self.pressure_in.faulted(), self.flow_in.faulted());
@@ -649,7 +670,7 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
                 || blind
                 || p_fault
                 || q_fault
-                || self.model_fault
+                || model_fault
                 || self.protection.tripped()
                 || o.alarms & !model_core::monitor::LOAD_CHANGED != 0,
             extrapolating: self.wb_extrapolating || self.nx_clamped.iter().any(|&c| c),
@@ -682,5 +703,26 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
                 values: self.out,
             }),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Regression (defect 5c of the protection issue): a white-box step that failed left the
+    /// diverged state in place and the fault latched for good, "any alarm" with it.
+    #[test]
+    fn a_diverged_white_box_restarts_at_its_steady_state() {
+        let wb = WhiteBox::<f32>::paper();
+        let mut s = wb.steady_state(50.0).unwrap();
+        let good = s;
+        s.speed_rpm = f32::NAN;
+        assert!(
+            !step_or_restart(&wb, &mut s, 50.0),
+            "the failure is reported"
+        );
+        assert_eq!(s.speed_rpm, good.speed_rpm, "restarted at the steady state");
+        assert!(step_or_restart(&wb, &mut s, 50.0), "and steps again");
     }
 }
