@@ -116,7 +116,7 @@ impl VirtualBench {
                 "transmitter lags must be >= 0",
             ));
         }
-        if !(config.drive_speed_limit_rpm > 0.0) {
+        if config.drive_speed_limit_rpm.is_nan() || config.drive_speed_limit_rpm <= 0.0 {
             return Err(BenchError::InvalidParameter(
                 "the drive's speed limit must be > 0",
             ));

@@ -247,14 +247,14 @@ impl Fit {
     /// [`unsigned_register`], noting a finite value outside 0..=`max` counts.
     fn unsigned(&mut self, x: f32, scale: f32, max: u16) -> u16 {
         let v = x * scale;
-        self.saturated |= !v.is_nan() && !(v > -0.5 && v < f32::from(max) + 0.5);
+        self.saturated |= v <= -0.5 || v >= f32::from(max) + 0.5;
         unsigned_register(x, scale).min(max)
     }
 
     /// [`signed_register`], noting a finite value outside −32 768..=32 767 counts.
     fn signed(&mut self, x: f32, scale: f32) -> u16 {
         let v = x * scale;
-        self.saturated |= !v.is_nan() && !(v > -32768.5 && v < 32767.5);
+        self.saturated |= v <= -32768.5 || v >= 32767.5;
         signed_register(x, scale)
     }
 }

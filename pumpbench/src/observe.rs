@@ -284,6 +284,10 @@ fn run<T: Real + Float>(
         let e = observer
             .step(f(dt), f(u), &m)
             .map_err(|e| observer_fail(k, e))?;
+        // Overspeed as the controller checks it: the row's speed cell (the drive's), else
+        // the estimate's; once per row here.
+        let speed = m.speed_rpm.filter(|w| w.is_finite()).unwrap_or(e.speed_rpm);
+        monitor.check_speed(f(dt), speed);
         let bits = monitor.update(&monitor_inputs(f(dt), f(u), &m, e));
         writeln!(
             w,
