@@ -37,7 +37,7 @@ use crate::scada::{Arithmetic, Mode, Published, Status};
 use crate::vfd::{VfdMap, VfdReadings};
 use model_core::excitation::McuPulses;
 use model_core::monitor::{Monitor, MonitorConfig, MonitorInputs};
-use model_core::narmax::mcu::{NarxF32, NarxF32State, NarxQ15, NarxQ15State};
+use model_core::narmax::mcu::{NarxF32, NarxF32State, NarxQ15, NarxQ15State, MAX_PERIOD_MS};
 use model_core::narmax::{NarmaxError, NarmaxOutput};
 use model_core::observer::{Measurements, Observer, ObserverConfig, ObserverError};
 use model_core::{BenchError, BenchState, Scheme, Signals, WhiteBox};
@@ -153,15 +153,15 @@ pub struct NarmaxModel<const F: usize, const H: usize> {
 }
 
 impl<const F: usize, const H: usize> NarmaxModel<F, H> {
-    /// The model sampled every `period_ms` ms (1..=1000, the firmware's rule for a model's
-    /// period); `float` and `fixed` are the same model's two passes (both made by
+    /// The model sampled every `period_ms` ms (1..=[`MAX_PERIOD_MS`], the firmware's rule for a
+    /// model's period, `model_core::narmax::mcu::firmware_period_ms`); `float` and `fixed` are the same model's two passes (both made by
     /// `pumpbench export`).
     pub fn new(
         float: &'static NarxF32<F, H>,
         fixed: &'static NarxQ15<F, H>,
         period_ms: u32,
     ) -> Result<Self, Error> {
-        if !(1..=1000).contains(&period_ms) {
+        if !(1..=MAX_PERIOD_MS).contains(&period_ms) {
             return Err(Error::Config("NARMAX period must be 1..=1000 ms"));
         }
         let (u0, y0) = (0.0, float.output_mean());

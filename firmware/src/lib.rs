@@ -31,6 +31,7 @@ pub use controller::control::{Commands, Inputs, Outputs, VfdStatus};
 use controller::control::{Config, Controller, Error, NarmaxModel};
 pub use controller::scada::Published;
 use core::sync::atomic::{AtomicU32, Ordering};
+use model_core::narmax::mcu::build_period_ms;
 
 /// The NARMAX models compiled in (`pumpbench export`).
 pub mod models {
@@ -39,9 +40,15 @@ pub mod models {
 }
 
 /// Pressure model period, ms.
-pub const PRESSURE_MS: u32 = (models::pressure::SAMPLE_PERIOD_S * 1000.0 + 0.5) as u32;
+pub const PRESSURE_MS: u32 = build_period_ms(models::pressure::SAMPLE_PERIOD_S);
 /// Flow model period, ms.
-pub const FLOW_MS: u32 = (models::flow::SAMPLE_PERIOD_S * 1000.0 + 0.5) as u32;
+pub const FLOW_MS: u32 = build_period_ms(models::flow::SAMPLE_PERIOD_S);
+// The observer takes a flow sample only on a pressure tick (Controller::new refuses the
+// rest at run time; here it is a build error).
+const _: () = assert!(
+    FLOW_MS.is_multiple_of(PRESSURE_MS),
+    "the flow model's period must be a whole multiple of the pressure model's"
+);
 
 /// The controller with the compiled-in models.
 pub type Core = Controller<

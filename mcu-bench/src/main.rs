@@ -29,6 +29,7 @@ use mcu_bench::{empty, inputs, models, plain_model, start_counter, Cost};
 use model_core::dsp::{smlad, smlad_portable};
 use model_core::excitation::SplitMix64;
 use model_core::monitor::{Monitor, MonitorConfig, MonitorInputs};
+use model_core::narmax::mcu::build_period_ms;
 use model_core::narmax::mcu::{tanh_f32, tanh_q15, NarxF32, NarxQ15};
 use model_core::narmax::Narmax;
 use model_core::observer::{Measurements, Observer, ObserverConfig};
@@ -345,9 +346,9 @@ fn monitor_update(c: &mut Cost, n: u32) -> Result<(), Error> {
 }
 
 /// Pressure model period, ms (as the firmware has it).
-const PRESSURE_MS: u32 = (models::pressure::SAMPLE_PERIOD_S * 1000.0 + 0.5) as u32;
+const PRESSURE_MS: u32 = build_period_ms(models::pressure::SAMPLE_PERIOD_S);
 /// Flow model period, ms.
-const FLOW_MS: u32 = (models::flow::SAMPLE_PERIOD_S * 1000.0 + 0.5) as u32;
+const FLOW_MS: u32 = build_period_ms(models::flow::SAMPLE_PERIOD_S);
 
 /// The control task's core, [`Controller::step`](controller::control::Controller::step), on
 /// the virtual bench in profile mode (the paper's excitation), NARMAX in f32, as the QEMU

@@ -94,6 +94,9 @@ pub enum NarmaxError {
     /// A hidden pre-activation can reach 2^14, or the output layer needs more than 16-bit
     /// mantissas: the model does not fit the Q15 pass ([`mcu::NarxQ15`]).
     FixedRange,
+    /// The sample period is not a whole number of milliseconds from 1 to
+    /// [`mcu::MAX_PERIOD_MS`] ([`mcu::firmware_period_ms`]).
+    Period,
 }
 
 impl core::fmt::Display for NarmaxError {
@@ -108,6 +111,10 @@ impl core::fmt::Display for NarmaxError {
             NarmaxError::NotNarx => "the firmware's passes take NARX models only (nc = 0, nk >= 1)",
             NarmaxError::FixedRange => {
                 "a pre-activation or the output is too large for the Q15 pass"
+            }
+            NarmaxError::Period => {
+                "the sample period must be a whole number of milliseconds from 1 to 1000 \
+                 (the controller steps every 1 ms)"
             }
         })
     }

@@ -77,6 +77,35 @@ pub struct NnsysidModel<'a> {
     pub y_range: [f64; 2],
 }
 
+/// Longest model period the firmware runs, ms: the controller steps the observer once per
+/// pressure period and refuses steps longer than 1 s.
+pub const MAX_PERIOD_MS: u32 = 1000;
+
+/// How far a model's period may be from a whole number of milliseconds, ms (1 µs: an f32
+/// period of up to 1 s is stored within 0.06 µs of its decimal value).
+pub const PERIOD_TOLERANCE_MS: f64 = 1e-3;
+
+/// The firmware's step count for a model sampled every `period_s` seconds: the controller
+/// ticks every 1 ms, so the period must be a whole number of milliseconds (within
+/// [`PERIOD_TOLERANCE_MS`]) from 1 to [`MAX_PERIOD_MS`]; anything else is
+/// [`NarmaxError::Period`] (never rounded to a period the model was not trained at).
+///
+/// `const fn`: the firmware derives its periods from the exported models with it, so a model
+/// written by hand with a period it cannot run is a build error; `pumpbench export` calls it
+/// before writing anything.
+pub const fn firmware_period_ms(period_s: f64) -> Result<u32, NarmaxError> {
+    let ms = period_s * 1000.0;
+    // NaN fails both comparisons.
+    if !(ms >= 1.0 - PERIOD_TOLERANCE_MS && ms <= MAX_PERIOD_MS as f64 + PERIOD_TOLERANCE_MS) {
+        return Err(NarmaxError::Period);
+    }
+    let whole = round(ms);
+    if abs(ms - whole as f64) > PERIOD_TOLERANCE_MS {
+        return Err(NarmaxError::Period);
+    }
+    Ok(whole as u32)
+}
+
 const fn all_finite(xs: &[f64]) -> bool {
     let mut i = 0;
     while i < xs.len() {
@@ -267,6 +296,18 @@ pub const fn build_error(e: NarmaxError) -> ! {
         NarmaxError::FixedRange => {
             panic!("NARMAX pre-activation or output too large for the Q15 pass")
         }
+        NarmaxError::Period => {
+            panic!("NARMAX sample period is not a whole number of ms from 1 to 1000")
+        }
+    }
+}
+
+/// [`firmware_period_ms`] of an exported model's `SAMPLE_PERIOD_S` (an f32, s), for a `const`:
+/// a period the firmware cannot run is a build error naming the rule.
+pub const fn build_period_ms(period_s: f32) -> u32 {
+    match firmware_period_ms(period_s as f64) {
+        Ok(ms) => ms,
+        Err(e) => build_error(e),
     }
 }
 
@@ -967,6 +1008,34 @@ impl<const F: usize, const H: usize> NarxQ15<F, H> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn firmware_period_whole_milliseconds_only() {
+        // What export writes is an f32: check the periods as the firmware sees them.
+        let f = |s: f32| firmware_period_ms(f64::from(s));
+        assert_eq!(f(0.05), Ok(50));
+        assert_eq!(f(0.001), Ok(1));
+        assert_eq!(f(1.0), Ok(1000));
+        assert_eq!(f(0.15), Ok(150));
+        for bad in [
+            1e-300_f64,
+            0.0,
+            -0.05,
+            0.0504,
+            0.0005,
+            1.001,
+            20.0,
+            f64::NAN,
+            f64::INFINITY,
+        ] {
+            assert_eq!(firmware_period_ms(bad), Err(NarmaxError::Period), "{bad}");
+        }
+        // 1 µs off a whole ms is still that ms; 2 µs is not.
+        assert_eq!(firmware_period_ms(0.050_000_9), Ok(50));
+        assert_eq!(firmware_period_ms(0.050_002), Err(NarmaxError::Period));
+        let message = NarmaxError::Period.to_string();
+        assert!(message.contains(&MAX_PERIOD_MS.to_string()), "{message}");
+    }
 
     #[test]
     fn tanh_q15_error() {

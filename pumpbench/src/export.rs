@@ -6,7 +6,7 @@
 use crate::modelfile::ModelFile;
 use crate::num::Short;
 use crate::Failure;
-use model_core::narmax::mcu::{NarxF32, NarxQ15};
+use model_core::narmax::mcu::{firmware_period_ms, NarxF32, NarxQ15};
 use std::io::Write;
 
 fn f64_list(values: impl Iterator<Item = f64>) -> String {
@@ -35,8 +35,22 @@ fn mcu_shape(m: &ModelFile) -> Result<(usize, usize), Failure> {
     })
 }
 
+/// The period the firmware will run `m` at, ms, by the rule its build applies to the f32
+/// this module writes (`firmware_period_ms`: a whole number of ms from 1 to 1000).
+fn mcu_period_ms(m: &ModelFile) -> Result<u32, Failure> {
+    firmware_period_ms(f64::from(m.sample_period_s as f32)).map_err(|e| Failure {
+        code: 2,
+        message: format!(
+            "this model cannot go to the firmware: sample_period_s {}: {e}",
+            m.sample_period_s
+        ),
+    })
+}
+
 /// Writes the Rust module for `m`; `source` names the model file in the header comment.
+/// Nothing is written if the firmware could not run the model.
 pub fn run(m: &ModelFile, source: &str, w: &mut dyn Write) -> Result<(), Failure> {
+    mcu_period_ms(m)?;
     let (frames, _) = mcu_shape(m)?;
     let n = m.lags().inputs();
     let l = m.lags;

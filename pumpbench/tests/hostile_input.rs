@@ -601,3 +601,57 @@ fn long_cells_and_headers_are_shortened_in_messages() {
         assert!(err.len() < 400, "{name}: {} bytes", err.len());
     }
 }
+
+/// Issue 21, defect 3: a model whose period the firmware cannot run (not a whole number of
+/// milliseconds from 1 to 1000: the controller ticks every 1 ms and the observer refuses
+/// steps over 1 s) is refused by `export` with exit 2 naming the rule, and nothing is
+/// written; the shipped 50 ms passes.
+#[test]
+fn export_refuses_periods_the_firmware_cannot_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let shipped = std::fs::read_to_string(model_copy(d, "shipped.json")).unwrap();
+    assert!(
+        shipped.contains("\"sample_period_s\": 0.05,"),
+        "the model's period field"
+    );
+    for (period, runs) in [
+        ("1e-300", false),
+        ("0.0504", false),
+        ("20", false),
+        ("0.0005", false),
+        ("0.05", true),
+        ("0.1", true),
+    ] {
+        let m = write(
+            d,
+            &format!("m{period}.json"),
+            &shipped.replace(
+                "\"sample_period_s\": 0.05,",
+                &format!("\"sample_period_s\": {period},"),
+            ),
+        );
+        let out_path = d.join(format!("m{period}.rs"));
+        let out = pumpbench(&[
+            "export",
+            "--weights",
+            &m,
+            "--output",
+            &out_path.display().to_string(),
+        ]);
+        if runs {
+            common::ok(&out, period);
+            assert!(out_path.exists(), "{period}: written");
+        } else {
+            refused(
+                &out,
+                &[
+                    "sample_period_s",
+                    "whole number of milliseconds from 1 to 1000",
+                ],
+                period,
+            );
+            assert!(!out_path.exists(), "{period}: nothing written");
+        }
+    }
+}

@@ -344,17 +344,19 @@ fn host_replay(header: &str, run_ms: u32) -> Result<Vec<String>> {
         ..Config::bench()
     };
     let e = |e: controller::control::Error| e.to_string();
-    let ms = |s: f32| (s * 1000.0 + 0.5) as u32;
+    let ms = |s: f32| {
+        model_core::narmax::mcu::firmware_period_ms(f64::from(s)).map_err(|e| e.to_string())
+    };
     let p = NarmaxModel::new(
         &pressure_model::F32,
         &pressure_model::Q15,
-        ms(pressure_model::SAMPLE_PERIOD_S),
+        ms(pressure_model::SAMPLE_PERIOD_S)?,
     )
     .map_err(e)?;
     let q = NarmaxModel::new(
         &flow_model::F32,
         &flow_model::Q15,
-        ms(flow_model::SAMPLE_PERIOD_S),
+        ms(flow_model::SAMPLE_PERIOD_S)?,
     )
     .map_err(e)?;
     let mut board =
