@@ -57,6 +57,7 @@ pub const MODEL_FAULT_SHOWN_MS: u32 = 2000;
 /// failed, which can only mean a diverged state: the step leaves it unchanged, so it would
 /// fail on every step after (the fault latched forever). The model restarts at its steady
 /// state for `u` instead.
+#[inline]
 fn step_or_restart(whitebox: &WhiteBox<f32>, state: &mut BenchState<f32>, u: f32) -> bool {
     if whitebox
         .step(state, u, TICK_MS as f32 * 1e-3, Scheme::Rk4)
@@ -258,7 +259,7 @@ impl defmt::Format for LogLine {
             self.arithmetic.name(),
             u, p, q, wb_rpm, wb_p, wb_q, nx_p, nx_q, r_wb_p, r_wb_q, r_nx_p, r_nx_q, vfd, ob_rpm, ob_q, ob_k2,
             self.values.alarms,
-            self.values.status.bits()
+            self.values.status
         );
     }
 }
@@ -514,6 +515,8 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             self.monitor.acknowledge();
         }
         let bits = self.monitor.bits();
+        // Published as they are now; an observer step later in this step updates them.
+        self.out.alarms = bits;
         self.protection
             .update(&c.protection, dt, bits, c.mode == Mode::Stop, ack)
     }
@@ -574,6 +577,7 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             vfd_link_alarm: inp.vfd.link_alarm,
         });
         let o = &mut self.out;
+        o.alarms = self.monitor.bits();
         o.observer_speed_rpm = e.speed_rpm;
         o.observer_flow_lps = e.flow_lps;
         o.observer_valve_k2 = e.valve_k2;
@@ -662,7 +666,6 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
         let blind = inp.vfd.readings.is_none();
         let readings = inp.vfd.readings.unwrap_or_default();
         let o = &mut self.out;
-        o.alarms = self.monitor.bits();
         o.trip_causes = self.protection.causes();
         o.status = Status {
             running: inp.commands.mode != Mode::Stop && !self.hold,
@@ -679,7 +682,8 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             flow_fault: q_fault,
             vfd_readings_invalid: blind,
             tripped: self.protection.tripped(),
-        };
+        }
+        .bits();
         o.torque_pct = u;
         o.vfd_speed_rpm = readings.speed_rpm;
         o.vfd_torque_pct = readings.torque_pct;

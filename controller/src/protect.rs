@@ -118,6 +118,17 @@ impl Protection {
         stopped: bool,
         acknowledge: bool,
     ) -> bool {
+        if alarms & (DRY_RUN | OVERSPEED | NO_FLOW) == 0
+            && self.tripped == 0
+            && self.no_flow_s == 0.0
+        {
+            // Nothing that could trip, nothing tripped (so no acknowledge pending): the
+            // common step, in a few instructions.
+            if stopped {
+                self.hold_until_stop = false;
+            }
+            return self.hold_until_stop;
+        }
         let mut trips = 0;
         if config.trip_on & TRIP_DRY_RUN != 0 {
             trips |= alarms & DRY_RUN;

@@ -6,7 +6,7 @@ use controller::bench::{VirtualBenchConfig, VirtualBoard, VirtualIo};
 use controller::control::{Config, LogLine, NarmaxModel};
 use controller::link::VfdPort;
 use controller::modbus::{crc16, Frame};
-use controller::scada::Mode;
+use controller::scada::{Mode, Status};
 use model_core::WhiteBox;
 
 /// The firmware's models, the very files it compiles in.
@@ -749,7 +749,7 @@ fn no_trip_in_30_minutes_of_pulses() {
         for s in 1..1800 {
             for _ in 0..1000 {
                 let out = b.tick().unwrap();
-                let st = out.published.status;
+                let st = Status::from_bits(out.published.status);
                 assert!(
                     !st.tripped && out.published.alarms & !model_core::monitor::LOAD_CHANGED == 0,
                     "{s} s: alarms {:#x}",
@@ -819,14 +819,14 @@ mod protection_properties {
                             let p = &out.published;
                             prop_assert!(out.torque_ref_pct.is_finite()
                                 && (0.0..=100.0).contains(&out.torque_ref_pct));
-                            if p.status.tripped {
+                            if Status::from_bits(p.status).tripped {
                                 prop_assert_eq!(out.torque_ref_pct, 0.0);
                                 prop_assert_eq!(out.requested_torque_pct, 0.0);
-                                prop_assert!(!p.status.running);
+                                prop_assert!(!Status::from_bits(p.status).running);
                                 prop_assert!(p.trip_causes != 0);
                             }
                             if prev_alarms & mask != 0 {
-                                prop_assert!(p.status.tripped,
+                                prop_assert!(Status::from_bits(p.status).tripped,
                                     "alarms {:#x} configured to trip ({:#x}) at {} ms, not tripped",
                                     prev_alarms, trip_on, out.t_ms);
                             }

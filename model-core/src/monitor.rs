@@ -214,6 +214,9 @@ impl<T: Real> Timer<T> {
 pub struct Monitor<T> {
     cfg: MonitorConfig<T>,
     timers: [Timer<T>; ALARMS],
+    /// The timers' `active` flags as bits, refreshed by every call that moves a timer (read
+    /// every 1 ms by the controller: a field, not a loop over the timers).
+    bits: u16,
     nis_avg: T,
     /// The estimate's speed at the last update, rpm.
     last_speed: Option<T>,
@@ -234,6 +237,7 @@ impl<T: Real> Monitor<T> {
         Self {
             cfg: config,
             timers: [Timer::IDLE; ALARMS],
+            bits: 0,
             nis_avg: T::ZERO,
             last_speed: None,
             last_drive_speed: None,
@@ -251,10 +255,16 @@ impl<T: Real> Monitor<T> {
 
     /// Alarm bits now (see the module table).
     pub fn bits(&self) -> u16 {
-        self.timers
+        self.bits
+    }
+
+    fn refresh_bits(&mut self) -> u16 {
+        self.bits = self
+            .timers
             .iter()
             .enumerate()
-            .fold(0, |acc, (i, t)| acc | (u16::from(t.active) << i))
+            .fold(0, |acc, (i, t)| acc | (u16::from(t.active) << i));
+        self.bits
     }
 
     /// The operator's acknowledge of the latched alarms raised now: each clears at once if
@@ -267,6 +277,7 @@ impl<T: Real> Monitor<T> {
                 t.settle(T::ZERO, false);
             }
         }
+        self.refresh_bits();
     }
 
     /// Latched alarms raised now that have an acknowledge waiting for their cause to go.
@@ -286,9 +297,9 @@ impl<T: Real> Monitor<T> {
 
     /// The overspeed check, on its own so that it can run more often than [`Self::update`]
     /// (the controller: every 1 ms): `speed_rpm` (the drive's reading, else the estimate's)
-    /// against the limit, `dt_s` since the last call. Returns the alarm bits. A speed that is
-    /// not finite is no reading: the timers hold.
-    pub fn check_speed(&mut self, dt_s: T, speed_rpm: T) -> u16 {
+    /// against the limit, `dt_s` since the last call. A speed that is not finite is no
+    /// reading: the timers hold. ([`Self::bits`] has the result.)
+    pub fn check_speed(&mut self, dt_s: T, speed_rpm: T) {
         if speed_rpm.is_finite() {
             let o = self.cfg.overspeed;
             let dt = if dt_s.is_finite() && dt_s > T::ZERO {
@@ -304,8 +315,8 @@ impl<T: Real> Monitor<T> {
                 o.clear_s,
                 o.latched,
             );
+            self.bits = self.bits & !OVERSPEED | u16::from(self.timers[8].active) << 8;
         }
-        self.bits()
     }
 
     /// One update; returns the alarm bits.
@@ -422,7 +433,7 @@ impl<T: Real> Monitor<T> {
             s.clear_s,
             s.latched,
         );
-        self.bits()
+        self.refresh_bits()
     }
 }
 
@@ -704,18 +715,13 @@ mod tests {
             "110 % of 1 750 rpm"
         );
         for _ in 0..1000 {
-            assert_eq!(mon.check_speed(1e-3, 1900.0), 0);
+            mon.check_speed(1e-3, 1900.0);
+            assert_eq!(mon.bits(), 0);
         }
-        assert_eq!(
-            mon.check_speed(1e-3, 1926.0),
-            OVERSPEED,
-            "the first reading over"
-        );
-        assert_eq!(
-            mon.check_speed(1e-3, f64::NAN),
-            OVERSPEED,
-            "no reading: held"
-        );
+        mon.check_speed(1e-3, 1926.0);
+        assert_eq!(mon.bits(), OVERSPEED, "the first reading over");
+        mon.check_speed(1e-3, f64::NAN);
+        assert_eq!(mon.bits(), OVERSPEED, "no reading: held");
         for _ in 0..3000 {
             mon.check_speed(1e-3, 0.0);
         }

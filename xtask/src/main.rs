@@ -384,8 +384,7 @@ fn log_text(log: &controller::control::LogLine) -> String {
     }
     s.push_str(&format!(
         " alarms={} status={}",
-        log.values.alarms,
-        log.values.status.bits()
+        log.values.alarms, log.values.status
     ));
     s
 }
