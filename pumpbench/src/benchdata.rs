@@ -11,8 +11,17 @@
 //!   transmitter span of 0..10 mca (pressure) and 0..30 l/s (flow): one code is 3.7 mm of
 //!   water and 0.011 l/s.
 //!
-//! Not modelled: water-column inertia, transmitter drift and offsets, VFD torque ripple.
+//! Not modelled: transmitter drift and offsets, VFD torque ripple.
 //! The bench itself is the paper's white-box model in f64, integrated with RK4 at ≤ 1 ms.
+//!
+//! Two dynamics the paper's model lacks can be added ([`Dynamics`]; both 0 by default, and
+//! then the record is byte for byte what it was before they existed):
+//! - water-column inertia (`--water-inertia L`, mca·s²/l): the flow is a state,
+//!   `L dQ/dt = F_H(ω, Q) − (k1 + k2²) Q² + c`, the head the pump makes beyond what the pipe,
+//!   the valve and the static head take accelerating the water column (for a pipe of length
+//!   ℓ m and section A m², L = ℓ / (g A) / 1000: 10 m of 50 mm pipe is 0.52);
+//! - the drive's torque loop (`--drive-lag-ms`): the electromagnetic torque follows Te(u)
+//!   (eq. 4) through a first-order lag.
 //!
 //! The bench can be made to differ from the paper's model, so that an observer built on that
 //! model can be tested against a known truth ([`Options`]):
@@ -22,7 +31,8 @@
 //! - a curve error (`--curve-error PCT`): the true pump-head curve is the paper's F_H (eq. 5,
 //!   all ten α) times (1 + PCT/100), the true load-torque curve the paper's F_T (eq. 6, all ten
 //!   β) times (1 − PCT/100): PCT > 0 is a stronger pump and a lighter load than the paper's
-//!   fits, PCT < 0 a weaker pump and a heavier load;
+//!   fits, PCT < 0 a weaker pump and a heavier load; `--curve-error H,T` sets the two apart:
+//!   F_H times (1 + H/100), F_T times (1 + T/100) (so `5` is `5,-5`);
 //! - `--truth` adds the bench's true state at each row's time (before lag, noise and
 //!   quantisation): `speed_true` (rpm), `flow_true` (l/s), `pressure_true` (mca) and
 //!   `k2_true` (√mca/(l/s)).
@@ -33,6 +43,9 @@
 use crate::input::{shown, TorqueInput};
 use crate::num::Short;
 use crate::Failure;
+use model_core::equations::{
+    electromagnetic_torque_pct, load_torque_pct, speed_derivative_rpm_per_s, valve_pressure_mca,
+};
 use model_core::excitation::SplitMix64;
 use model_core::{BenchParams, BenchState, Scheme, WhiteBox, MAX_STEP_S};
 use std::io::Write;
@@ -128,6 +141,46 @@ pub const VALVE_FACTOR_MAX: f64 = 5.0;
 pub const CURVE_ERROR_MAX_PCT: f64 = 20.0;
 /// Longest transmitter lag accepted, ms.
 pub const LAG_MAX_MS: f64 = 2000.0;
+/// Smallest non-zero water inertia accepted, mca·s²/l (below it the flow's time constant is
+/// under 0.1 ms at the steepest flow balance, and 1 ms steps would need too many sub-steps).
+pub const INERTIA_MIN: f64 = 1e-3;
+/// Largest water inertia accepted, mca·s²/l.
+pub const INERTIA_MAX: f64 = 10.0;
+
+/// A curve error: the true curves are the paper's times `1 + pct/100`, each on its own.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CurveError {
+    /// Pump head F_H (eq. 5, all ten α), %.
+    pub head_pct: f64,
+    /// Load torque F_T (eq. 6, all ten β), %.
+    pub torque_pct: f64,
+}
+
+impl CurveError {
+    /// The paper's curves.
+    pub const NONE: Self = Self {
+        head_pct: 0.0,
+        torque_pct: 0.0,
+    };
+}
+
+/// Dynamics the paper's model lacks (0: not there).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Dynamics {
+    /// Water-column inertia L, mca·s²/l: `L dQ/dt` is the head left over from the flow
+    /// balance (0, or [`INERTIA_MIN`]..=[`INERTIA_MAX`]).
+    pub water_inertia: f64,
+    /// First-order lag of the drive's torque loop, s (0..=2 s).
+    pub drive_lag_s: f64,
+}
+
+impl Dynamics {
+    /// The paper's model: flow algebraic, torque at once.
+    pub const NONE: Self = Self {
+        water_inertia: 0.0,
+        drive_lag_s: 0.0,
+    };
+}
 
 /// How the bench of a record differs from the paper's model, and what is written.
 #[derive(Debug, Clone, PartialEq)]
@@ -136,8 +189,10 @@ pub struct Options {
     pub seed: u64,
     /// Valve steps, times strictly increasing (see [`parse_valve_steps`]).
     pub valve_steps: Vec<ValveStep>,
-    /// Curve error, %: F_H × (1 + pct/100), F_T × (1 − pct/100) (see [`true_bench`]).
-    pub curve_error_pct: f64,
+    /// Curve error (see [`true_bench`]).
+    pub curve_error: CurveError,
+    /// Water inertia and drive lag.
+    pub dynamics: Dynamics,
     /// Write the true state columns too.
     pub truth: bool,
     /// Flow transmitter lag, s.
@@ -152,7 +207,8 @@ impl Options {
         Options {
             seed,
             valve_steps: Vec::new(),
-            curve_error_pct: 0.0,
+            curve_error: CurveError::NONE,
+            dynamics: Dynamics::NONE,
             truth: false,
             flow_lag_s: FLOW.tau_s,
             pressure_lag_s: PRESSURE.tau_s,
@@ -221,16 +277,52 @@ pub fn parse_valve_steps(text: &str) -> Result<Vec<ValveStep>, String> {
     Ok(steps)
 }
 
-/// Parses `--curve-error PCT`: finite, |PCT| ≤ [`CURVE_ERROR_MAX_PCT`].
-pub fn parse_curve_error(text: &str) -> Result<f64, String> {
-    let pct = finite("--curve-error", text)?;
-    if pct.abs() <= CURVE_ERROR_MAX_PCT {
-        Ok(pct)
+/// Parses `--curve-error PCT` (head +PCT, load torque −PCT) or `--curve-error H,T` (head H,
+/// load torque T): each finite, |·| ≤ [`CURVE_ERROR_MAX_PCT`].
+pub fn parse_curve_error(text: &str) -> Result<CurveError, String> {
+    let one = |t: &str| -> Result<f64, String> {
+        let pct = finite("--curve-error", t)?;
+        if pct.abs() <= CURVE_ERROR_MAX_PCT {
+            Ok(pct)
+        } else {
+            Err(format!(
+                "--curve-error {}: must be within -{m}..{m} %",
+                Short(pct),
+                m = Short(CURVE_ERROR_MAX_PCT)
+            ))
+        }
+    };
+    match text.split_once(',') {
+        None => {
+            let pct = one(text)?;
+            Ok(CurveError {
+                head_pct: pct,
+                torque_pct: -pct,
+            })
+        }
+        Some((h, t)) if !t.contains(',') => Ok(CurveError {
+            head_pct: one(h)?,
+            torque_pct: one(t)?,
+        }),
+        Some(_) => Err(format!(
+            "--curve-error '{}': expected PCT or HEAD_PCT,TORQUE_PCT",
+            shown(text)
+        )),
+    }
+}
+
+/// Parses `--water-inertia L` (mca·s²/l): 0, or finite within
+/// [`INERTIA_MIN`]..=[`INERTIA_MAX`].
+pub fn parse_water_inertia(text: &str) -> Result<f64, String> {
+    let l = finite("--water-inertia", text)?;
+    if l == 0.0 || (INERTIA_MIN..=INERTIA_MAX).contains(&l) {
+        Ok(l.abs())
     } else {
         Err(format!(
-            "--curve-error {}: must be within -{m}..{m} %",
-            Short(pct),
-            m = Short(CURVE_ERROR_MAX_PCT)
+            "--water-inertia {}: must be 0 or within {}..{} mca·s²/l",
+            Short(l),
+            Short(INERTIA_MIN),
+            Short(INERTIA_MAX)
         ))
     }
 }
@@ -251,22 +343,110 @@ pub fn parse_lag_ms(option: &str, text: &str) -> Result<f64, String> {
     }
 }
 
-/// The true bench for a curve error of `pct` %: the paper's parameters with every α (pump head
-/// F_H, eq. 5) times (1 + pct/100) and every β (load torque F_T, eq. 6) times (1 − pct/100).
-/// Positive `pct`: a stronger pump and a lighter load than the paper's fits. 0 gives the paper's
-/// bench exactly. The message (one line) says why the parameters are refused.
-pub fn true_bench(pct: f64) -> Result<WhiteBox<f64>, String> {
+/// The true bench for a curve error: the paper's parameters with every α (pump head F_H,
+/// eq. 5) times (1 + head_pct/100) and every β (load torque F_T, eq. 6) times
+/// (1 + torque_pct/100). [`CurveError::NONE`] gives the paper's bench exactly. The message
+/// (one line) says why the parameters are refused.
+pub fn true_bench(e: CurveError) -> Result<WhiteBox<f64>, String> {
     let mut p = BenchParams::<f64>::paper();
-    let head = 1.0 + pct / 100.0;
-    let load = 1.0 - pct / 100.0;
+    let head = 1.0 + e.head_pct / 100.0;
+    let load = 1.0 + e.torque_pct / 100.0;
     p.alpha.iter_mut().for_each(|a| *a *= head);
     p.beta.iter_mut().for_each(|b| *b *= load);
-    WhiteBox::new(p).map_err(|e| {
+    WhiteBox::new(p).map_err(|err| {
         format!(
-            "--curve-error {}: the scaled pump-head and load-torque curves are refused: {e}",
-            Short(pct)
+            "--curve-error {},{}: the scaled pump-head and load-torque curves are refused: {err}",
+            Short(e.head_pct),
+            Short(e.torque_pct)
         )
     })
+}
+
+/// The bench with the dynamics the paper's model lacks ([`Dynamics`]): speed, flow (a state
+/// when there is water inertia, else the flow balance's root) and the electromagnetic torque
+/// the drive delivers (lagged when the drive has a lag).
+#[derive(Debug, Clone, Copy)]
+struct Rich {
+    speed_rpm: f64,
+    flow_lps: f64,
+    te_pct: f64,
+}
+
+/// Most RK4 sub-steps in one step of the rich bench (the flow's time constant sets them).
+const RICH_MAX_SUBSTEPS: f64 = 1000.0;
+
+impl Rich {
+    /// At the white-box bench's (steady) `state`, the drive delivering Te(u) for its torque.
+    fn at(bench: &WhiteBox<f64>, state: &BenchState<f64>) -> Self {
+        let s = bench.signals(state);
+        Rich {
+            speed_rpm: s.speed_rpm,
+            flow_lps: s.flow_lps,
+            te_pct: s.electromagnetic_torque_pct,
+        }
+    }
+
+    /// dω/dt (rpm/s) and dQ/dt (l/s², 0 without inertia) at speed `w`, flow `q`, delivered
+    /// torque `te`.
+    fn rates(bench: &WhiteBox<f64>, d: &Dynamics, w: f64, q: f64, te: f64) -> (f64, f64) {
+        let p = bench.params();
+        let dw = speed_derivative_rpm_per_s(
+            te,
+            load_torque_pct(&p.beta, w, q),
+            bench.accel_rpm_per_s_per_pct(),
+        );
+        let dq = if d.water_inertia > 0.0 {
+            bench.balance(w).eval(q) / d.water_inertia
+        } else {
+            0.0
+        };
+        (dw, dq)
+    }
+
+    /// Advances by `h` seconds with the torque reference `u` held: the drive's lag exactly
+    /// (its target Te(u) is constant over the step), speed and flow by RK4 in equal sub-steps,
+    /// as many as keep a sub-step under half the flow's time constant `L / |∂g/∂Q|`. Without
+    /// inertia the flow is the flow balance's root at each stage (as in the white-box bench).
+    fn advance(&mut self, bench: &WhiteBox<f64>, d: &Dynamics, u: f64, h: f64) {
+        let target = electromagnetic_torque_pct(&bench.params().gamma, u);
+        let te0 = self.te_pct;
+        let te_at = |t: f64| {
+            if d.drive_lag_s > 0.0 {
+                target + (te0 - target) * (-t / d.drive_lag_s).exp()
+            } else {
+                target
+            }
+        };
+        let n = if d.water_inertia > 0.0 {
+            let slope = bench.balance(self.speed_rpm).slope(self.flow_lps).abs();
+            (h * slope / d.water_inertia / 0.5)
+                .ceil()
+                .clamp(1.0, RICH_MAX_SUBSTEPS)
+        } else {
+            1.0
+        };
+        let hs = h / n;
+        let inertial = d.water_inertia > 0.0;
+        let flow = |w: f64, q: f64| if inertial { q } else { bench.flow_at(w, q) };
+        for k in 0..n as u32 {
+            let t0 = f64::from(k) * hs;
+            let (w, q) = (self.speed_rpm, self.flow_lps);
+            let f = |w: f64, q: f64, t: f64| {
+                let q = flow(w.max(0.0), q);
+                let (dw, dq) = Self::rates(bench, d, w.max(0.0), q, te_at(t));
+                (dw, dq, q)
+            };
+            let (k1w, k1q, q1) = f(w, q, t0);
+            let (k2w, k2q, q2) = f(w + hs / 2.0 * k1w, q1 + hs / 2.0 * k1q, t0 + hs / 2.0);
+            let (k3w, k3q, q3) = f(w + hs / 2.0 * k2w, q2 + hs / 2.0 * k2q, t0 + hs / 2.0);
+            let (k4w, k4q, _) = f(w + hs * k3w, q3 + hs * k3q, t0 + hs);
+            self.speed_rpm = (w + hs / 6.0 * (k1w + 2.0 * k2w + 2.0 * k3w + k4w)).max(0.0);
+            let q_end = q1 + hs / 6.0 * (k1q + 2.0 * k2q + 2.0 * k3q + k4q);
+            // No backflow: the pump's check valve.
+            self.flow_lps = flow(self.speed_rpm, q_end).max(0.0);
+        }
+        self.te_pct = te_at(h);
+    }
 }
 
 /// Writes the synthetic record of `input`: one row per input row, the readings at that time
@@ -285,8 +465,7 @@ pub fn run(input: &TorqueInput, o: &Options, w: &mut dyn Write) -> Result<(), Fa
         code: 1,
         message: m,
     };
-    let mut bench =
-        true_bench(o.curve_error_pct).map_err(|message| Failure { code: 2, message })?;
+    let mut bench = true_bench(o.curve_error).map_err(|message| Failure { code: 2, message })?;
     let nominal_k2 = bench.params().valve_k2;
     let static_head_c_mca = bench.params().static_head_c_mca;
     let pressure = Transmitter {
@@ -315,9 +494,27 @@ pub fn run(input: &TorqueInput, o: &Options, w: &mut dyn Write) -> Result<(), Fa
     let mut state: BenchState<f64> = bench
         .steady_state(input.torque_ref_pct[0])
         .map_err(|e| fail(format!("model: {e}")))?;
+    // With inertia or a drive lag the rich bench carries the state (started at the same
+    // steady state); without, the white-box bench alone, as before they existed.
+    let mut rich = (o.dynamics != Dynamics::NONE).then(|| Rich::at(&bench, &state));
+    // Speed, flow and pressure now.
+    let now = |bench: &WhiteBox<f64>, state: &BenchState<f64>, rich: &Option<Rich>| match rich {
+        Some(r) => {
+            let par = bench.params();
+            let q = r.flow_lps;
+            (
+                r.speed_rpm,
+                q,
+                valve_pressure_mca(par.valve_k2, par.static_head_c_mca, q),
+            )
+        }
+        None => {
+            let sig = bench.signals(state);
+            (sig.speed_rpm, sig.flow_lps, sig.pressure_mca)
+        }
+    };
     let mut rng = SplitMix64::new(o.seed);
-    let s0 = bench.signals(&state);
-    let (mut p, mut q, mut s) = (s0.pressure_mca, s0.flow_lps, s0.speed_rpm);
+    let (mut s, mut q, mut p) = now(&bench, &state, &rich);
     let write_fail = |e: std::io::Error| fail(format!("cannot write the output: {e}"));
     write!(w, "t_s,torque_ref_pct,speed_rpm,flow_lps,pressure_mca").map_err(write_fail)?;
     if o.truth {
@@ -336,15 +533,26 @@ pub fn run(input: &TorqueInput, o: &Options, w: &mut dyn Write) -> Result<(), Fa
                     // (k = 0 starts at the previous row's time: its steps are applied.)
                     valve_at(&mut bench, t0 + k as f64 * h)?;
                 }
-                // One step of h (h <= 1 ms < MAX_STEP_S), also below model-core's 1 µs
-                // smallest step, as `simulate` integrates a short interval.
-                bench
-                    .advance(&mut state, u, h, MAX_STEP_S, Scheme::Rk4)
-                    .map_err(|e| fail(format!("model: {e}")))?;
-                let sig = bench.signals(&state);
-                pressure.lag(&mut p, sig.pressure_mca, h);
-                flow.lag(&mut q, sig.flow_lps, h);
-                SPEED.lag(&mut s, sig.speed_rpm, h);
+                match rich.as_mut() {
+                    Some(r) => r.advance(&bench, &o.dynamics, u, h),
+                    // One step of h (h <= 1 ms < MAX_STEP_S), also below model-core's 1 µs
+                    // smallest step, as `simulate` integrates a short interval.
+                    None => {
+                        bench
+                            .advance(&mut state, u, h, MAX_STEP_S, Scheme::Rk4)
+                            .map_err(|e| fail(format!("model: {e}")))?;
+                    }
+                }
+                let (w_now, q_now, p_now) = now(&bench, &state, &rich);
+                if !(w_now.is_finite() && q_now.is_finite()) {
+                    return Err(fail(format!(
+                        "model: the bench diverged at t = {} s",
+                        Short(t0 + (k + 1) as f64 * h)
+                    )));
+                }
+                pressure.lag(&mut p, p_now, h);
+                flow.lag(&mut q, q_now, h);
+                SPEED.lag(&mut s, w_now, h);
             }
         }
         valve_at(&mut bench, input.t_s[i])?;
@@ -362,13 +570,13 @@ pub fn run(input: &TorqueInput, o: &Options, w: &mut dyn Write) -> Result<(), Fa
         .map_err(write_fail)?;
         if o.truth {
             // The true state in shortest round-trip form (not a reading: no logger rounding).
-            let sig = bench.signals(&state);
+            let (w_now, q_now, p_now) = now(&bench, &state, &rich);
             write!(
                 w,
                 ",{},{},{},{}",
-                Short(sig.speed_rpm),
-                Short(sig.flow_lps),
-                Short(sig.pressure_mca),
+                Short(w_now),
+                Short(q_now),
+                Short(p_now),
                 Short(bench.params().valve_k2)
             )
             .map_err(write_fail)?;
@@ -409,17 +617,24 @@ mod tests {
         let pressure = parse_lag_ms("--pressure-lag-ms", "20").unwrap();
         assert_eq!(flow.to_bits(), FLOW.tau_s.to_bits());
         assert_eq!(pressure.to_bits(), PRESSURE.tau_s.to_bits());
-        assert_eq!(parse_curve_error("0").unwrap(), 0.0);
+        let zero = parse_curve_error("0").unwrap();
+        assert_eq!((zero.head_pct, zero.torque_pct), (0.0, 0.0));
         let o = Options::with_seed(3);
         assert_eq!((o.flow_lag_s, o.pressure_lag_s), (flow, pressure));
-        assert_eq!(true_bench(0.0).unwrap(), WhiteBox::<f64>::paper());
-        assert_eq!(true_bench(-0.0).unwrap(), WhiteBox::<f64>::paper());
+        assert_eq!(o.dynamics, Dynamics::NONE);
+        assert_eq!(parse_water_inertia("0").unwrap(), 0.0);
+        assert_eq!(parse_lag_ms("--drive-lag-ms", "0").unwrap(), 0.0);
+        assert_eq!(true_bench(zero).unwrap(), WhiteBox::<f64>::paper());
+        assert_eq!(
+            true_bench(parse_curve_error("-0").unwrap()).unwrap(),
+            WhiteBox::<f64>::paper()
+        );
     }
 
     #[test]
     fn curve_error_scales_every_alpha_up_and_every_beta_down() {
         let paper = BenchParams::<f64>::paper();
-        let b = true_bench(5.0).unwrap();
+        let b = true_bench(parse_curve_error("5").unwrap()).unwrap();
         let p = b.params();
         for (a, a0) in p.alpha.iter().zip(&paper.alpha) {
             assert_eq!(*a, a0 * 1.05);
@@ -437,8 +652,20 @@ mod tests {
             )
         );
         // Parameters the model refuses are a one-line message naming the option.
+        // The two curves apart: 8 % more head and 8 % more load torque.
+        let p = true_bench(parse_curve_error("8,8").unwrap()).unwrap();
+        assert_eq!(p.params().alpha[0], paper.alpha[0] * 1.08);
+        assert_eq!(p.params().beta[0], paper.beta[0] * 1.08);
+        for text in ["1,2,3", "x,1", "1,30", ""] {
+            let e = parse_curve_error(text).unwrap_err();
+            assert!(e.starts_with("--curve-error"), "{e}");
+        }
         for pct in [f64::NAN, -100.0] {
-            let e = true_bench(pct).unwrap_err();
+            let e = true_bench(CurveError {
+                head_pct: pct,
+                torque_pct: -pct,
+            })
+            .unwrap_err();
             assert!(
                 e.starts_with("--curve-error ") && e.contains("refused"),
                 "{e}"

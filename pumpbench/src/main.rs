@@ -326,14 +326,34 @@ enum Command {
         /// Curve error PCT, % (-20..20): the TRUE bench's pump-head curve F_H is the paper's
         /// times (1 + PCT/100) (all ten alpha) and its load-torque curve F_T the paper's times
         /// (1 - PCT/100) (all ten beta). PCT > 0: a stronger pump and a lighter load than the
-        /// paper's fits; PCT < 0: a weaker pump and a heavier load.
+        /// paper's fits; PCT < 0: a weaker pump and a heavier load. HEAD_PCT,TORQUE_PCT sets
+        /// them apart: F_H times (1 + HEAD_PCT/100), F_T times (1 + TORQUE_PCT/100).
         #[arg(
             long,
-            value_name = "PCT",
+            value_name = "PCT|HEAD_PCT,TORQUE_PCT",
             default_value = "0",
             allow_hyphen_values = true
         )]
         curve_error: String,
+        /// Water-column inertia L, mca·s²/l (0, or 0.001..10): the flow becomes a state,
+        /// L dQ/dt = F_H(ω, Q) − (k1 + k2²) Q² + c. 0 keeps the paper's algebraic flow (and
+        /// the record's bytes).
+        #[arg(
+            long,
+            value_name = "L",
+            default_value = "0",
+            allow_hyphen_values = true
+        )]
+        water_inertia: String,
+        /// First-order lag of the drive's torque loop, ms (0..2000; 0: none): the
+        /// electromagnetic torque follows Te(u) through it.
+        #[arg(
+            long,
+            value_name = "MS",
+            default_value = "0",
+            allow_hyphen_values = true
+        )]
+        drive_lag_ms: String,
         /// Add the columns speed_true (rpm), flow_true (l/s), pressure_true (mca) and k2_true
         /// (√mca/(l/s)) after the readings: the bench's true state at the row's time, before
         /// transmitter lag, noise and quantisation (shortest round-trip form).
@@ -584,6 +604,8 @@ fn run(cli: Cli) -> Result<(), Failure> {
             output,
             valve_steps,
             curve_error,
+            water_inertia,
+            drive_lag_ms,
             truth,
             flow_lag_ms,
             pressure_lag_ms,
@@ -595,15 +617,20 @@ fn run(cli: Cli) -> Result<(), Failure> {
                     Some(text) => benchdata::parse_valve_steps(text).map_err(Failure::usage)?,
                     None => Vec::new(),
                 },
-                curve_error_pct: benchdata::parse_curve_error(&curve_error)
-                    .map_err(Failure::usage)?,
+                curve_error: benchdata::parse_curve_error(&curve_error).map_err(Failure::usage)?,
+                dynamics: benchdata::Dynamics {
+                    water_inertia: benchdata::parse_water_inertia(&water_inertia)
+                        .map_err(Failure::usage)?,
+                    drive_lag_s: benchdata::parse_lag_ms("--drive-lag-ms", &drive_lag_ms)
+                        .map_err(Failure::usage)?,
+                },
                 truth,
                 flow_lag_s: benchdata::parse_lag_ms("--flow-lag-ms", &flow_lag_ms)
                     .map_err(Failure::usage)?,
                 pressure_lag_s: benchdata::parse_lag_ms("--pressure-lag-ms", &pressure_lag_ms)
                     .map_err(Failure::usage)?,
             };
-            benchdata::true_bench(options.curve_error_pct).map_err(Failure::usage)?;
+            benchdata::true_bench(options.curve_error).map_err(Failure::usage)?;
             check_optional_output(&[("--input", &input)], output.as_deref())?;
             let data = input::read_input_to_integrate(
                 &input,

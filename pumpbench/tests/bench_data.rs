@@ -55,6 +55,10 @@ fn without_the_new_options_the_record_is_byte_for_byte_unchanged() {
     let dir = tempfile::tempdir().unwrap();
     let u = write(dir.path(), "u.csv", U_CSV);
     let defaults = [
+        "--water-inertia",
+        "0",
+        "--drive-lag-ms",
+        "0",
         "--curve-error",
         "0",
         "--flow-lag-ms",
@@ -345,6 +349,49 @@ fn bad_options_are_refused_with_one_line_exit_2_and_no_output() {
         ),
         ("--curve-error", "5%", "--curve-error '5%': not a number"),
         (
+            "--curve-error",
+            "5,-25",
+            "--curve-error -25: must be within",
+        ),
+        (
+            "--curve-error",
+            "5,8,1",
+            "expected PCT or HEAD_PCT,TORQUE_PCT",
+        ),
+        ("--curve-error", "5,", "--curve-error '': not a number"),
+        (
+            "--water-inertia",
+            "-0.1",
+            "--water-inertia -0.1: must be 0 or within 1e-3..10 mca·s²/l",
+        ),
+        ("--water-inertia", "1e-4", "--water-inertia 1e-4: must be 0"),
+        ("--water-inertia", "10.5", "--water-inertia 10.5: must be 0"),
+        (
+            "--water-inertia",
+            "nan",
+            "--water-inertia 'nan': not a finite number",
+        ),
+        (
+            "--water-inertia",
+            "0.1x",
+            "--water-inertia '0.1x': not a number",
+        ),
+        (
+            "--drive-lag-ms",
+            "-1",
+            "--drive-lag-ms -1: must be within 0..2000 ms",
+        ),
+        (
+            "--drive-lag-ms",
+            "2001",
+            "--drive-lag-ms 2001: must be within",
+        ),
+        (
+            "--drive-lag-ms",
+            "inf",
+            "--drive-lag-ms 'inf': not a finite",
+        ),
+        (
             "--flow-lag-ms",
             "-1",
             "--flow-lag-ms -1: must be within 0..2000 ms",
@@ -418,4 +465,108 @@ fn bad_options_are_refused_with_one_line_exit_2_and_no_output() {
     ]));
     assert_eq!(r.col("k2_true").last(), Some(&(0.1082 * 5.0)));
     bench_data(&["--input", &u, "--curve-error", "20"]);
+}
+
+/// The true rows of a record of `u` with `extra` options (seed 1, truth columns).
+fn truth_of(u: &str, extra: &[&str]) -> Table {
+    let mut args = vec!["--input", u, "--truth"];
+    args.extend_from_slice(extra);
+    Table::parse(&bench_data(&args))
+}
+
+/// Water inertia makes the flow a state: after a torque step it lags the inertia-free bench's,
+/// the more the larger the inertia, and settles to the same steady state; a valve step moves
+/// the flow over a time, not at once.
+#[test]
+fn water_inertia_delays_the_flow_and_keeps_the_steady_state() {
+    let dir = tempfile::tempdir().unwrap();
+    let u = write(
+        dir.path(),
+        "u.csv",
+        &input(8.0, 0.01, |t| if t < 1.0 { 30.0 } else { 60.0 }),
+    );
+    let steps = ["--valve-steps", "5:1.3"];
+    let none = truth_of(&u, &steps);
+    let light = truth_of(&u, &[steps[0], steps[1], "--water-inertia", "0.02"]);
+    let heavy = truth_of(&u, &[steps[0], steps[1], "--water-inertia", "0.1"]);
+    let q = |r: &Table, t: f64| r.col("flow_true")[row_at(r, t)];
+    // At rest before the step, all three are the same steady state.
+    for r in [&light, &heavy] {
+        assert!((q(r, 0.5) / q(&none, 0.5) - 1.0).abs() < 1e-9);
+    }
+    // 50 ms after the torque step the flow has risen less with more inertia.
+    let (q0, ql, qh) = (q(&none, 1.05), q(&light, 1.05), q(&heavy, 1.05));
+    let base = q(&none, 1.0);
+    assert!(
+        q0 - base > ql - base && ql - base > qh - base && qh > base,
+        "rise 50 ms after the step: {} {} {}",
+        q0 - base,
+        ql - base,
+        qh - base
+    );
+    // Settled again well before the valve step.
+    for r in [&light, &heavy] {
+        assert!((q(r, 4.9) / q(&none, 4.9) - 1.0).abs() < 1e-4);
+    }
+    // The valve closes at 5 s: without inertia the flow drops at once, with it over tens of ms.
+    let drop = |r: &Table| (q(r, 4.99) - q(r, 5.01)) / (q(r, 4.99) - q(r, 7.9));
+    assert!(drop(&none) > 0.5, "no inertia: {}", drop(&none));
+    assert!(
+        drop(&heavy) < 0.5 * drop(&none),
+        "inertia 0.1: {}",
+        drop(&heavy)
+    );
+    // Pressure follows the flow through the valve: Hs = k2² Q² − c at every row.
+    let (p, k2, qq) = (
+        heavy.col("pressure_true"),
+        heavy.col("k2_true"),
+        heavy.col("flow_true"),
+    );
+    for i in 0..p.len() {
+        let hs = k2[i] * k2[i] * qq[i] * qq[i] - 0.252;
+        assert!(
+            (p[i] - hs).abs() < 1e-6 * (1.0 + hs.abs()),
+            "row {i}: {} {hs}",
+            p[i]
+        );
+    }
+}
+
+/// The drive's torque lag delays the speed's response to a torque step (about by the lag)
+/// and keeps the steady state.
+#[test]
+fn the_drive_lag_delays_the_speed_and_keeps_the_steady_state() {
+    let dir = tempfile::tempdir().unwrap();
+    let u = write(
+        dir.path(),
+        "u.csv",
+        &input(6.0, 0.01, |t| if t < 1.0 { 30.0 } else { 60.0 }),
+    );
+    let none = truth_of(&u, &[]);
+    let lag = truth_of(&u, &["--drive-lag-ms", "50"]);
+    let w = |r: &Table, t: f64| r.col("speed_true")[row_at(r, t)];
+    let base = w(&none, 1.0);
+    assert_eq!(w(&lag, 1.0), base);
+    // 20 ms after the step the lagged drive has delivered about 1 − e^{−20/50} ≈ 0.33 of the
+    // extra torque: the speed has risen by much less.
+    let (r0, r1) = (w(&none, 1.02) - base, w(&lag, 1.02) - base);
+    assert!(r1 > 0.0 && r1 < 0.5 * r0, "{r0} {r1}");
+    // Settled to the same speed.
+    assert!((w(&lag, 5.9) / w(&none, 5.9) - 1.0).abs() < 1e-6);
+    // Both at once, with a two-sided curve error, run and stay finite and positive.
+    let both = truth_of(
+        &u,
+        &[
+            "--drive-lag-ms",
+            "50",
+            "--water-inertia",
+            "0.1",
+            "--curve-error",
+            "-8,8",
+        ],
+    );
+    assert!(both
+        .col("flow_true")
+        .iter()
+        .all(|q| q.is_finite() && *q > 0.0));
 }
