@@ -86,6 +86,18 @@ pub struct ObserverConfig<T> {
     pub pressure_lag_sd_s: T,
     /// How far the flow transmitter's lag may be from `flow_lag_s`, s (1 σ), likewise.
     pub flow_lag_sd_s: T,
+    /// The drive's torque loop: the electromagnetic torque follows Te(u) through a
+    /// first-order lag of this time constant, s (≥ 0).
+    pub drive_lag_s: T,
+    /// How far the drive's lag may be from `drive_lag_s`, s (1 σ): a torque that changes by
+    /// ΔTe over a step adds (K · this · ΔTe)² to the speed's variance (K in rpm/s per %).
+    pub drive_lag_sd_s: T,
+    /// Water-column inertia L, mca·s²/l (≥ 0): the flow follows the flow balance's root Q*
+    /// with the time constant `L / |∂g/∂Q|` (g the flow balance, in mca).
+    pub water_inertia: T,
+    /// How far the inertia may be from `water_inertia`, mca·s²/l (1 σ): adds the flow's
+    /// rate times the time constant it makes to the flow's and the readings' variances.
+    pub water_inertia_sd: T,
     /// Process noise of speed, rpm²/s (model error of the torque balance).
     pub speed_psd: T,
     /// Random walk of k2, (mca^½·s/l)²/s.
@@ -114,6 +126,10 @@ pub struct ObserverConfig<T> {
     pub k2_range: (T, T),
     /// Range of both curve scales (min, max), > 0.
     pub scale_range: (T, T),
+    /// A measurement channel missing (or implausible) for longer than this, s, is lost: the
+    /// curve scales it made observable are held until it returns (> 0; longer than the
+    /// slowest channel's period, the flow's 100 ms).
+    pub lost_after_s: T,
 }
 
 impl<T: Real> ObserverConfig<T> {
@@ -125,13 +141,17 @@ impl<T: Real> ObserverConfig<T> {
         Self {
             params: BenchParams::paper(),
             pressure_lag_s: f(0.020),
-            flow_lag_s: f(0.080),
+            flow_lag_s: f(0.120),
             pressure_lag_sd_s: f(0.040),
-            flow_lag_sd_s: f(0.070),
+            flow_lag_sd_s: f(0.100),
+            drive_lag_s: f(0.025),
+            drive_lag_sd_s: f(0.025),
+            water_inertia: f(0.05),
+            water_inertia_sd: f(0.075),
             speed_psd: f(400.0),
             k2_psd: f(1e-6),
-            head_scale_psd: f(1e-5),
-            torque_scale_psd: f(1e-5),
+            head_scale_psd: f(1e-7),
+            torque_scale_psd: f(1e-7),
             lag_psd: f(1e-6),
             pressure_sigma_mca: f(0.006),
             flow_sigma_lps: f(0.04),
@@ -142,6 +162,7 @@ impl<T: Real> ObserverConfig<T> {
             k2_jump_sigma: f(0.02),
             k2_range: (f(0.02), f(1.0)),
             scale_range: (f(0.5), f(1.5)),
+            lost_after_s: f(1.0),
         }
     }
 
@@ -156,6 +177,10 @@ impl<T: Real> ObserverConfig<T> {
             && nonneg(self.flow_lag_s)
             && nonneg(self.pressure_lag_sd_s)
             && nonneg(self.flow_lag_sd_s)
+            && nonneg(self.drive_lag_s)
+            && nonneg(self.drive_lag_sd_s)
+            && nonneg(self.water_inertia)
+            && nonneg(self.water_inertia_sd)
             && nonneg(self.speed_psd)
             && nonneg(self.k2_psd)
             && nonneg(self.head_scale_psd)
@@ -175,6 +200,7 @@ impl<T: Real> ObserverConfig<T> {
             && self.scale_range.1.is_finite()
             && self.scale_range.0 < T::ONE
             && T::ONE < self.scale_range.1
+            && pos(self.lost_after_s)
             && self.k2_range.0 <= self.params.valve_k2
             && self.params.valve_k2 <= self.k2_range.1;
         if ok {
@@ -334,7 +360,23 @@ pub struct Observer<T> {
     x: Vector<T>,
     p: Matrix<T>,
     flow_warm: T,
+    /// Electromagnetic torque the drive delivers now, % (Te(u) through the drive's lag).
+    te_applied: T,
+    /// Flow now, l/s: the flow balance's root Q* through the water column's lag.
+    flow_now: T,
+    /// The flow balance's root Q* at the state, l/s (where `flow_now` is heading).
+    flow_star: T,
+    /// How far the water column's time constant may be off at the last step, s (1 σ), and
+    /// dQ*/dt over that step, l/s²: the flow is off by about their product.
+    flow_tau_sd_s: T,
+    flow_rate: T,
     rejections: [u8; 3],
+    /// Time since each channel (pressure, flow, speed) last brought a plausible value, s.
+    silent_s: [T; 3],
+    /// Channels lost (see [`Observer::decide_holds`]).
+    lost: [bool; 3],
+    /// States held this step (their process noise off, their gain zero): see [`Observer::held`].
+    held: [bool; STATES],
     step_consts: StepConsts<T>,
     /// Outlet pressure and flow at the end of the last prediction (what the lagged readings
     /// move toward).
@@ -366,7 +408,15 @@ impl<T: Real> Observer<T> {
             x: [T::ZERO; STATES],
             p: [[T::ZERO; STATES]; STATES],
             flow_warm: T::ZERO,
+            te_applied: T::ZERO,
+            flow_now: T::ZERO,
+            flow_star: T::ZERO,
+            flow_tau_sd_s: T::ZERO,
+            flow_rate: T::ZERO,
             rejections: [0; 3],
+            silent_s: [T::ZERO; 3],
+            lost: [false; 3],
+            held: [false; STATES],
             step_consts: StepConsts::new(&config, T::from_f64(0.05)),
             predicted: (T::ZERO, T::ZERO),
             last: None,
@@ -405,6 +455,9 @@ impl<T: Real> Observer<T> {
         }
         x[SPEED] = lo;
         let h = self.hydraulics(&x);
+        self.te_applied = te;
+        (self.flow_now, self.flow_star) = (h.flow, h.flow);
+        (self.flow_tau_sd_s, self.flow_rate) = (T::ZERO, T::ZERO);
         x[PRESSURE_LAGGED] = self.outlet_pressure(&x, h.flow);
         x[FLOW_LAGGED] = h.flow;
         self.predicted = (x[PRESSURE_LAGGED], h.flow);
@@ -414,6 +467,9 @@ impl<T: Real> Observer<T> {
             self.p[i][i] = *s * *s;
         }
         self.rejections = [0; 3];
+        self.silent_s = [T::ZERO; 3];
+        self.lost = [false; 3];
+        self.held = [false; STATES];
         let none = Innovation::none(Use::Missing);
         self.last = Some(self.estimate(&h, none, none, none));
     }
@@ -448,12 +504,24 @@ impl<T: Real> Observer<T> {
         q
     }
 
-    /// dω/dt at `x` with electromagnetic torque `te`, and the flow there: the mean's
-    /// integration needs no partials.
-    fn speed_rate_lean(&mut self, x: &Vector<T>, te: T) -> (T, T) {
-        let q = self.flow(x);
+    /// dω/dt at `x` with electromagnetic torque `te` and flow `q` (l/s).
+    fn speed_rate(&self, x: &Vector<T>, te: T, q: T) -> T {
         let load = CubicInFlow::from_poly(&self.cfg.params.beta, x[SPEED]).eval(q);
-        (self.accel * (te - x[TORQUE_SCALE] * load), q)
+        self.accel * (te - x[TORQUE_SCALE] * load)
+    }
+
+    /// The water column's time constant at `x` for the flow balance's root `q`, s:
+    /// `L / |∂g/∂Q|` (0 without inertia).
+    fn flow_tau(&self, x: &Vector<T>, q: T, inertia: T) -> T {
+        if inertia <= T::ZERO {
+            return T::ZERO;
+        }
+        let par = &self.cfg.params;
+        let (w, k2, s_h) = (x[SPEED], x[K2], x[HEAD_SCALE]);
+        let slope = s_h * CubicInFlow::from_poly(&par.alpha, w).slope(q)
+            - T::from_f64(2.0) * (par.pipe_k1 + k2 * k2) * q;
+        // |∂g/∂Q| ≥ 0.05 mca per l/s: a flat balance (no flow) must not freeze the flow.
+        inertia / slope.abs().max(T::from_f64(0.05))
     }
 
     /// Flow at `x` with the partials the linearisation and the standard deviations need.
@@ -504,20 +572,99 @@ impl<T: Real> Observer<T> {
             return Err(ObserverError::Step);
         }
         let (x0, p0, warm0) = (self.x, self.p, self.flow_warm);
+        let aux0 = (
+            self.te_applied,
+            self.flow_now,
+            self.flow_star,
+            self.flow_tau_sd_s,
+            self.flow_rate,
+        );
+        self.decide_holds(dt_s, m);
         self.predict(dt_s, clamp_torque(torque_ref_pct));
         let pressure = self.update_pressure(m.pressure_mca);
         let flow = self.update_flow(m.flow_lps);
         let speed = self.update_speed(m.speed_rpm);
         self.bound();
         let h = self.hydraulics(&self.x.clone());
+        // The updates moved the state, so the balance's root: the flow through the water
+        // column's lag moves with it (its lag behind the root kept), never below 0.
+        self.flow_now = (self.flow_now + h.flow - self.flow_star).max(T::ZERO);
+        self.flow_star = h.flow;
         let e = self.estimate(&h, pressure, flow, speed);
         if self.healthy() && estimate_finite(&e) {
             self.last = Some(e);
         } else {
             // Keep the last good state: a diverged step is undone, never published.
             (self.x, self.p, self.flow_warm) = (x0, p0, warm0);
+            (
+                self.te_applied,
+                self.flow_now,
+                self.flow_star,
+                self.flow_tau_sd_s,
+                self.flow_rate,
+            ) = aux0;
         }
         Ok(self.estimate_now())
+    }
+
+    /// Which states are held this step. A channel is lost once it has brought no plausible
+    /// value for longer than [`ObserverConfig::lost_after_s`], and found again once it has
+    /// brought them for that long (up to twice that after a long loss). With pressure, speed and flow
+    /// all there, the valve and both curve scales are observable; take one away and they are
+    /// not, all at once: at one operating point a change of the valve and a change of a
+    /// curve look alike. They differ in time: a valve moves in seconds, a curve drifts over
+    /// months. So while flow or speed is lost both scales are held at what the full set
+    /// taught, and while pressure is lost the head scale is; k2 stays free and tracks the
+    /// valve from what remains. Released as soon as the channel is back.
+    fn decide_holds(&mut self, dt: T, m: &Measurements<T>) {
+        let plausible = |ch: usize, y: Option<T>| {
+            let (lo, hi) = self.plausible_range(ch);
+            y.is_some_and(|v| v.is_finite() && v >= lo && v <= hi)
+        };
+        let present = [
+            plausible(0, m.pressure_mca),
+            plausible(1, m.flow_lps),
+            plausible(2, m.speed_rpm),
+        ];
+        // silent_s counts up while a channel is away and, once it is lost, down while it is
+        // back: the scales stay held until it has been back as long as it takes to be lost,
+        // so the first readings after a loss re-converge k2 and speed, not the curves.
+        let limit = self.cfg.lost_after_s;
+        for (ch, p) in present.into_iter().enumerate() {
+            let s = &mut self.silent_s[ch];
+            *s = match (p, self.lost[ch]) {
+                (false, _) => (*s + dt).min(T::from_f64(1e6)),
+                (true, false) => T::ZERO,
+                (true, true) => (s.min(limit + limit) - dt).max(T::ZERO),
+            };
+            if *s > limit {
+                self.lost[ch] = true;
+            } else if *s <= T::ZERO {
+                self.lost[ch] = false;
+            }
+        }
+        let (p_lost, q_lost, w_lost) = (self.lost[0], self.lost[1], self.lost[2]);
+        self.held = [false; STATES];
+        self.held[HEAD_SCALE] = p_lost || q_lost || w_lost;
+        self.held[TORQUE_SCALE] = q_lost || w_lost;
+    }
+
+    /// What channel `ch` (pressure mca, flow l/s, speed rpm) can plausibly read (see the
+    /// module docs): outside it a value is not used.
+    fn plausible_range(&self, ch: usize) -> (T, T) {
+        match ch {
+            0 => (
+                -self.cfg.params.static_head_c_mca - T::from_f64(0.5),
+                T::from_f64(60.0),
+            ),
+            1 => (T::from_f64(-0.5), T::from_f64(60.0)),
+            _ => (T::from_f64(-50.0), T::from_f64(4000.0)),
+        }
+    }
+
+    /// States held in the last step (see [`Self::decide_holds`]): indices as [`SPEED`], [`K2`], ….
+    pub fn held(&self) -> &[bool; STATES] {
+        &self.held
     }
 
     fn predict(&mut self, dt: T, u: T) {
@@ -566,25 +713,43 @@ impl<T: Real> Observer<T> {
             phi[FLOW_LAGGED][j] = (T::ONE - aq) * dq;
         }
 
-        // The mean: Heun in sub-steps, the lags exact for a target held over a sub-step.
+        // The mean: Heun in sub-steps. The drive's torque is exact for Te(u) held over the
+        // step; the flow follows the balance's root through the water column's lag (exact for
+        // a root held over a sub-step), the transmitters follow the flow (ramp-exact).
         let h = k.substep_s;
-        let (mut hs_start, mut q_start) = (self.outlet_pressure(&self.x, h0.flow), h0.flow);
+        let te_start = self.te_applied;
+        let te_at = |j: u32| te + (te_start - te) * k.drive_decay_pow(j);
+        let inertia = self.cfg.water_inertia;
+        let q_star0 = h0.flow;
+        let mut q = self.flow_now;
+        let (mut hs_start, mut q_start) = (self.outlet_pressure(&self.x, q), q);
+        let mut q_star = q_star0;
+        let mut tau = self.flow_tau(&self.x, q_star, inertia);
         // dω/dt at the start of a sub-step: the end of the last one's.
-        let mut rate = self.accel * (te - s_t * h0.torque);
-        for _ in 0..k.substeps {
+        let mut rate = self.speed_rate(&self.x, te_at(0), q);
+        for j in 0..k.substeps {
             let x = self.x;
             let mut xe = x;
             xe[SPEED] = x[SPEED] + h * rate;
-            let (rate_e, _) = self.speed_rate_lean(&xe, te);
+            let q_e_star = self.flow(&xe);
+            let q_e = lag_to(q, q_e_star, h, tau);
+            let rate_e = self.speed_rate(&xe, te_at(j + 1), q_e);
             self.x[SPEED] = x[SPEED] + h * (rate + rate_e) / two;
-            let (rate_end, q_end) = self.speed_rate_lean(&self.x.clone(), te);
-            rate = rate_end;
-            let hs_end = self.outlet_pressure(&self.x, q_end);
+            q_star = self.flow(&self.x.clone());
+            tau = self.flow_tau(&self.x, q_star, inertia);
+            q = lag_to(q, q_star, h, tau);
+            rate = self.speed_rate(&self.x, te_at(j + 1), q);
+            let hs_end = self.outlet_pressure(&self.x, q);
             self.x[PRESSURE_LAGGED] = k.lag_p.advance(self.x[PRESSURE_LAGGED], hs_start, hs_end);
-            self.x[FLOW_LAGGED] = k.lag_q.advance(self.x[FLOW_LAGGED], q_start, q_end);
-            (hs_start, q_start) = (hs_end, q_end);
+            self.x[FLOW_LAGGED] = k.lag_q.advance(self.x[FLOW_LAGGED], q_start, q);
+            (hs_start, q_start) = (hs_end, q);
         }
         self.predicted = (hs_start, q_start);
+        self.te_applied = te_at(k.substeps);
+        self.flow_now = q;
+        self.flow_star = q_star;
+        self.flow_tau_sd_s = self.flow_tau(&self.x, q_star, self.cfg.water_inertia_sd);
+        self.flow_rate = (q_star - q_star0) / dt;
 
         // P = Φ P Φᵀ + Q, with rows K2, HEAD_SCALE, TORQUE_SCALE of Φ the identity.
         let p = self.p;
@@ -618,8 +783,13 @@ impl<T: Real> Observer<T> {
             self.cfg.lag_psd,
         ];
         for (i, q) in qd.iter().enumerate() {
-            out[i][i] += *q * dt;
+            if !self.held[i] {
+                out[i][i] += *q * dt;
+            }
         }
+        // A drive lag off by its σ moves the torque-time by σ · ΔTe over a change of torque.
+        let dw = self.accel * self.cfg.drive_lag_sd_s * (self.te_applied - te_start);
+        out[SPEED][SPEED] += dw * dw;
         self.p = out;
         self.cap_variances();
         self.symmetrize();
@@ -637,34 +807,43 @@ impl<T: Real> Observer<T> {
         sigma * sigma + e * e
     }
 
+    /// The flow's error from an uncertain water inertia now, l/s (1 σ).
+    fn inertia_flow_sd(&self) -> T {
+        self.flow_tau_sd_s * self.flow_rate
+    }
+
     fn update_pressure(&mut self, y: Option<T>) -> Innovation<T> {
         let c = &self.cfg;
-        let lo = -c.params.static_head_c_mca - T::from_f64(0.5);
+        let (lo, hi) = self.plausible_range(0);
+        let e = T::from_f64(2.0) * self.x[K2] * self.x[K2] * self.flow_now * self.inertia_flow_sd();
         let r = Self::lag_variance(
             c.pressure_sigma_mca,
             c.pressure_lag_sd_s,
             self.predicted.0,
             self.x[PRESSURE_LAGGED],
             c.pressure_lag_s,
-        );
-        self.update(0, PRESSURE_LAGGED, y, lo, T::from_f64(60.0), r)
+        ) + e * e;
+        self.update(0, PRESSURE_LAGGED, y, lo, hi, r)
     }
 
     fn update_flow(&mut self, y: Option<T>) -> Innovation<T> {
         let c = &self.cfg;
+        let e = self.inertia_flow_sd();
         let r = Self::lag_variance(
             c.flow_sigma_lps,
             c.flow_lag_sd_s,
             self.predicted.1,
             self.x[FLOW_LAGGED],
             c.flow_lag_s,
-        );
-        self.update(1, FLOW_LAGGED, y, T::from_f64(-0.5), T::from_f64(60.0), r)
+        ) + e * e;
+        let (lo, hi) = self.plausible_range(1);
+        self.update(1, FLOW_LAGGED, y, lo, hi, r)
     }
 
     fn update_speed(&mut self, y: Option<T>) -> Innovation<T> {
         let r = self.cfg.speed_sigma_rpm;
-        self.update(2, SPEED, y, T::from_f64(-50.0), T::from_f64(4000.0), r * r)
+        let (lo, hi) = self.plausible_range(2);
+        self.update(2, SPEED, y, lo, hi, r * r)
     }
 
     /// One scalar update of state `i` measured directly, Joseph form.
@@ -697,7 +876,16 @@ impl<T: Real> Observer<T> {
         }
         self.rejections[ch] = 0;
         let s = self.p[i][i] + r;
-        let k: Vector<T> = core::array::from_fn(|a| self.p[a][i] / s);
+        // Held states are "considered", not estimated (Schmidt): zero gain, their variance
+        // and correlations kept, so the estimate's σ still carries their uncertainty. The
+        // Joseph form below is right for any gain.
+        let k: Vector<T> = core::array::from_fn(|a| {
+            if self.held[a] {
+                T::ZERO
+            } else {
+                self.p[a][i] / s
+            }
+        });
         for (a, ka) in k.iter().enumerate() {
             self.x[a] += *ka * nu;
         }
@@ -802,8 +990,11 @@ impl<T: Real> Observer<T> {
         let two = T::from_f64(2.0);
         let x = &self.x;
         let par = &self.cfg.params;
-        let (k2, q, s_h) = (x[K2], h.flow, x[HEAD_SCALE]);
+        // The flow through the water column's lag; the sensitivities are the root's.
+        let (k2, q, s_h) = (x[K2], self.flow_now, x[HEAD_SCALE]);
         let j_q = [h.dq[0], h.dq[1], h.dq[2], T::ZERO, T::ZERO, T::ZERO];
+        let e_q = self.inertia_flow_sd();
+        let e_p = two * k2 * k2 * q * e_q;
         let mut j_p: Vector<T> = core::array::from_fn(|a| two * k2 * k2 * q * j_q[a]);
         j_p[K2] += two * k2 * q * q;
         // Pump head s_H F_H(ω, Q(ω, k2, s_H)).
@@ -828,8 +1019,8 @@ impl<T: Real> Observer<T> {
             hydraulic_power_w: power,
             load_torque_pct: x[TORQUE_SCALE] * h.torque,
             speed_sd_rpm: self.sd_state(SPEED),
-            flow_sd_lps: self.sd(&j_q),
-            pressure_sd_mca: self.sd(&j_p),
+            flow_sd_lps: hypot(self.sd(&j_q), e_q),
+            pressure_sd_mca: hypot(self.sd(&j_p), e_p),
             valve_k2_sd: self.sd_state(K2),
             head_scale_sd: self.sd_state(HEAD_SCALE),
             torque_scale_sd: self.sd_state(TORQUE_SCALE),
@@ -894,13 +1085,27 @@ struct StepConsts<T> {
     flow_decay: T,
     lag_p: Lag<T>,
     lag_q: Lag<T>,
+    /// e^{−h/τ_d} of the drive's lag over one sub-step (0 without a lag).
+    drive_decay: T,
 }
 
 impl<T: Real> StepConsts<T> {
+    /// The drive lag's decay over `j` sub-steps.
+    fn drive_decay_pow(&self, j: u32) -> T {
+        let mut a = T::ONE;
+        for _ in 0..j {
+            a = a * self.drive_decay;
+        }
+        a
+    }
+
     fn new(cfg: &ObserverConfig<T>, dt: T) -> Self {
         // The fewest substeps of at most MAX_SUBSTEP_S, ≥ 1 (dt ≤ MAX_DT_S keeps it ≤ 400),
         // counted in T: no conversion through f64 (software on the MCU).
-        let max_sub = T::from_f64(MAX_SUBSTEP_S);
+        // A step a few ulps over a multiple of the sub-step (times read from a file: 31.85 −
+        // 31.8 is 0.05000000000000071 in f64, 0.05 in f32) takes no extra sub-step, so f32
+        // and f64 integrate alike.
+        let max_sub = T::from_f64(MAX_SUBSTEP_S * (1.0 + 1e-6));
         let (mut substeps, mut n) = (1u32, T::ONE);
         while n * max_sub < dt && substeps < 400 {
             substeps += 1;
@@ -922,7 +1127,27 @@ impl<T: Real> StepConsts<T> {
             flow_decay: decay(cfg.flow_lag_s),
             lag_p: Lag::new(cfg.pressure_lag_s, substep_s),
             lag_q: Lag::new(cfg.flow_lag_s, substep_s),
+            drive_decay: if cfg.drive_lag_s > T::ZERO {
+                (-substep_s / cfg.drive_lag_s).exp()
+            } else {
+                T::ZERO
+            },
         }
+    }
+}
+
+/// √(a² + b²).
+fn hypot<T: Real>(a: T, b: T) -> T {
+    (a * a + b * b).sqrt()
+}
+
+/// `x` after `h` seconds of a first-order lag `tau` toward a held `target` (`tau` = 0: the
+/// target).
+fn lag_to<T: Real>(x: T, target: T, h: T, tau: T) -> T {
+    if tau > T::ZERO {
+        target + (x - target) * (-h / tau).exp()
+    } else {
+        target
     }
 }
 
@@ -1200,7 +1425,7 @@ pub(crate) mod tests {
 
 #[cfg(test)]
 mod robustness {
-    use super::tests::{record, run};
+    use super::tests::{record, run, Row};
     use super::*;
     use proptest::prelude::*;
 
@@ -1262,31 +1487,54 @@ mod robustness {
     /// the estimates stay within 5 % and recover after.
     #[test]
     fn a_transmitter_at_2_ma_is_not_used() {
+        // Not used means: the estimate is exactly what it is with the cells empty, and the
+        // flow and k2 stay right through the 20 s from what remains.
         let rows = record(6, 80.0, 0.03, &[]);
-        let mut o = Observer::<f64>::new(ObserverConfig::paper(), 20.0).unwrap();
-        let mut worst: f64 = 0.0;
-        for (i, r) in rows.iter().enumerate() {
-            let fault = (30.0..50.0).contains(&r.t_s);
-            let m = Measurements {
-                pressure_mca: Some(if fault { -1.25 } else { r.p_meas }),
-                flow_lps: (i % 2 == 1).then_some(r.q_meas),
-                speed_rpm: Some(r.w_meas),
-            };
-            let e = o.step(0.05, r.torque_pct, &m).unwrap();
-            if fault {
-                assert_eq!(e.pressure.used, Use::Implausible);
+        let run = |faulted: bool| {
+            let mut o = Observer::<f64>::new(ObserverConfig::paper(), 20.0).unwrap();
+            let mut out = vec![];
+            for (i, r) in rows.iter().enumerate() {
+                let fault = (30.0..50.0).contains(&r.t_s);
+                let pressure = match (fault, faulted) {
+                    (false, _) => Some(r.p_meas),
+                    (true, true) => Some(-1.25),
+                    (true, false) => None,
+                };
+                let m = Measurements {
+                    pressure_mca: pressure,
+                    flow_lps: (i % 2 == 1).then_some(r.q_meas),
+                    speed_rpm: Some(r.w_meas),
+                };
+                let e = o.step(0.05, r.torque_pct, &m).unwrap();
+                if fault && faulted {
+                    assert_eq!(e.pressure.used, Use::Implausible);
+                }
+                out.push((r, e));
             }
-            if r.t_s > 20.0 {
-                worst = worst
-                    .max((e.flow_lps / r.flow - 1.0).abs())
-                    .max((e.valve_k2 / r.k2 - 1.0).abs());
-            }
+            out
+        };
+        let (faulted, missing) = (run(true), run(false));
+        for ((r, a), (_, b)) in faulted.iter().zip(&missing) {
+            assert_eq!(
+                (a.flow_lps, a.valve_k2, a.speed_rpm),
+                (b.flow_lps, b.valve_k2, b.speed_rpm),
+                "{} s",
+                r.t_s
+            );
         }
-        println!(
-            "pressure at 2 mA for 20 s: worst flow/k2 error {:.2} %",
-            worst * 100.0
+        let window: Vec<_> = faulted
+            .iter()
+            .filter(|(r, _)| (30.0..50.0).contains(&r.t_s))
+            .collect();
+        let mape = |f: &dyn Fn(&Row, &Estimate<f64>) -> f64| {
+            100.0 * window.iter().map(|(r, e)| f(r, e).abs()).sum::<f64>() / window.len() as f64
+        };
+        let (flow, k2) = (
+            mape(&|r, e| e.flow_lps / r.flow - 1.0),
+            mape(&|r, e| e.valve_k2 / r.k2 - 1.0),
         );
-        assert!(worst < 0.05);
+        println!("pressure at 2 mA for 20 s: flow MAPE {flow:.2} %, k2 {k2:.2} %");
+        assert!(flow < 1.0 && k2 < 1.0);
     }
 
     fn channel() -> impl Strategy<Value = Option<f64>> {
