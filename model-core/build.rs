@@ -32,4 +32,11 @@ fn main() {
     if env::var("TARGET").is_ok_and(|t| t.starts_with("thumbv7em-")) {
         println!("cargo:rustc-cfg=model_core_smlad");
     }
+    // The FPU's square root, `VSQRT.F32` (model-core's `dsp` module): hard-float Cortex-M4F/M7.
+    println!("cargo::rustc-check-cfg=cfg(model_core_vsqrt)");
+    if env::var("TARGET").is_ok_and(|t| {
+        (t.starts_with("thumbv7em-") || t.starts_with("thumbv8m.main-")) && t.ends_with("eabihf")
+    }) {
+        println!("cargo:rustc-cfg=model_core_vsqrt");
+    }
 }

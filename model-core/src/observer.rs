@@ -51,6 +51,8 @@ use crate::BenchError;
 
 /// Number of states.
 pub const STATES: usize = 6;
+/// The states a prediction moves through Φ (the others are random walks).
+const MOVED: [usize; 3] = [SPEED, PRESSURE_LAGGED, FLOW_LAGGED];
 /// Index of speed, rpm.
 pub const SPEED: usize = 0;
 /// Index of the valve coefficient k2.
@@ -686,11 +688,12 @@ impl<T: Real> Observer<T> {
             -a * h0.torque,
         ];
         let adt = a_ww * dt;
-        let mut phi = [[T::ZERO; STATES]; STATES];
-        phi[SPEED][SPEED] = T::ONE + adt + adt * adt / two;
+        // The rows of Φ that are not the identity's, for SPEED, PRESSURE_LAGGED and
+        // FLOW_LAGGED (k2 and the scales are random walks).
+        let mut phi = [[T::ZERO; STATES]; 3];
+        phi[0][SPEED] = T::ONE + adt + adt * adt / two;
         for j in 1..4 {
-            phi[SPEED][j] = a_w[j] * dt * (T::ONE + adt / two);
-            phi[j][j] = T::ONE;
+            phi[0][j] = a_w[j] * dt * (T::ONE + adt / two);
         }
         // Outlet pressure sensitivities at the start: Hs = k2² Q² − c.
         let (k2, q0) = (self.x[K2], h0.flow);
@@ -700,17 +703,17 @@ impl<T: Real> Observer<T> {
             two * k2 * k2 * q0 * h0.dq[2],
         ];
         let (ap, aq) = (k.pressure_decay, k.flow_decay);
-        phi[PRESSURE_LAGGED][PRESSURE_LAGGED] = ap;
-        phi[FLOW_LAGGED][FLOW_LAGGED] = aq;
+        phi[1][PRESSURE_LAGGED] = ap;
+        phi[2][FLOW_LAGGED] = aq;
         for j in 0..4 {
             // Through the speed at the end of the step, and directly for k2, s_H.
-            let (mut dp, mut dq) = (hs[0] * phi[SPEED][j], h0.dq[0] * phi[SPEED][j]);
+            let (mut dp, mut dq) = (hs[0] * phi[0][j], h0.dq[0] * phi[0][j]);
             if (1..3).contains(&j) {
                 dp += hs[j];
                 dq += h0.dq[j];
             }
-            phi[PRESSURE_LAGGED][j] = (T::ONE - ap) * dp;
-            phi[FLOW_LAGGED][j] = (T::ONE - aq) * dq;
+            phi[1][j] = (T::ONE - ap) * dp;
+            phi[2][j] = (T::ONE - aq) * dq;
         }
 
         // The mean: Heun in sub-steps. The drive's torque is exact for Te(u) held over the
@@ -751,29 +754,34 @@ impl<T: Real> Observer<T> {
         self.flow_tau_sd_s = self.flow_tau(&self.x, q_star, self.cfg.water_inertia_sd);
         self.flow_rate = (q_star - q_star0) / dt;
 
-        // P = Φ P Φᵀ + Q, with rows K2, HEAD_SCALE, TORQUE_SCALE of Φ the identity.
-        let p = self.p;
-        let mut m = p;
-        for i in [SPEED, PRESSURE_LAGGED, FLOW_LAGGED] {
-            for c in 0..STATES {
-                let mut s = T::ZERO;
-                for (j, row) in p.iter().enumerate() {
-                    s += phi[i][j] * row[c];
-                }
-                m[i][c] = s;
+        // P = Φ P Φᵀ + Q, with rows K2, HEAD_SCALE, TORQUE_SCALE of Φ the identity: only
+        // the rows and columns of the three moved states change. M = (those rows of Φ) P;
+        // then P[i][c] = M[i][c] for c not moved (P symmetric), and the moved block is
+        // M Φᵀ. Written symmetric.
+        let mut m = [[T::ZERO; STATES]; 3];
+        for (mr, fr) in m.iter_mut().zip(&phi) {
+            for (c, v) in mr.iter_mut().enumerate() {
+                *v = fr
+                    .iter()
+                    .zip(&self.p)
+                    .fold(T::ZERO, |s, (f, row)| s + *f * row[c]);
             }
         }
-        let mut out = m;
-        for row in out.iter_mut().zip(m.iter()) {
-            let (o, mr) = row;
-            for k in [SPEED, PRESSURE_LAGGED, FLOW_LAGGED] {
-                let mut s = T::ZERO;
-                for j in 0..STATES {
-                    s += mr[j] * phi[k][j];
-                }
-                o[k] = s;
+        for (r, &i) in MOVED.iter().enumerate() {
+            for c in [K2, HEAD_SCALE, TORQUE_SCALE] {
+                self.p[i][c] = m[r][c];
+                self.p[c][i] = m[r][c];
+            }
+            for (r2, &k) in MOVED.iter().enumerate().skip(r) {
+                let v = m[r]
+                    .iter()
+                    .zip(&phi[r2])
+                    .fold(T::ZERO, |s, (a, b)| s + *a * *b);
+                self.p[i][k] = v;
+                self.p[k][i] = v;
             }
         }
+        let out = &mut self.p;
         let qd = [
             self.cfg.speed_psd,
             self.cfg.k2_psd,
@@ -790,9 +798,7 @@ impl<T: Real> Observer<T> {
         // A drive lag off by its σ moves the torque-time by σ · ΔTe over a change of torque.
         let dw = self.accel * self.cfg.drive_lag_sd_s * (self.te_applied - te_start);
         out[SPEED][SPEED] += dw * dw;
-        self.p = out;
         self.cap_variances();
-        self.symmetrize();
     }
 
     /// A transmitter's noise variance plus what its uncertain lag adds while the signal
@@ -889,22 +895,23 @@ impl<T: Real> Observer<T> {
         for (a, ka) in k.iter().enumerate() {
             self.x[a] += *ka * nu;
         }
-        // Joseph: P = (I − k eᵢᵀ) P (I − k eᵢᵀ)ᵀ + k r kᵀ.
+        // Joseph, P = (I − k eᵢᵀ) P (I − k eᵢᵀ)ᵀ + k r kᵀ, expanded: with p = P eᵢ and
+        // s = pᵢᵢ + r it is P − k pᵀ − p kᵀ + s k kᵀ = P − k gᵀ − p kᵀ, g = p − s k (0 where
+        // the gain is optimal, p where it is held). Symmetric by construction: the upper
+        // triangle, mirrored.
         let pi: Vector<T> = self.p[i];
-        let mut a_m = self.p;
-        for (a, row) in a_m.iter_mut().enumerate() {
-            for (c, v) in row.iter_mut().enumerate() {
-                *v = *v - k[a] * pi[c];
+        let g: Vector<T> = core::array::from_fn(|a| pi[a] - s * k[a]);
+        let floor = T::from_f64(1e-12);
+        for a in 0..STATES {
+            let (ka, pa) = (k[a], pi[a]);
+            let v = self.p[a][a] - ka * g[a] - pa * ka;
+            self.p[a][a] = v.max(floor);
+            for b in (a + 1)..STATES {
+                let v = self.p[a][b] - ka * g[b] - pa * k[b];
+                self.p[a][b] = v;
+                self.p[b][a] = v;
             }
         }
-        let ai: Vector<T> = core::array::from_fn(|a| a_m[a][i]);
-        for (a, row) in a_m.iter_mut().enumerate() {
-            for (c, v) in row.iter_mut().enumerate() {
-                *v = *v - ai[a] * k[c] + k[a] * r * k[c];
-            }
-        }
-        self.p = a_m;
-        self.symmetrize();
         Innovation {
             used: Use::Used,
             value: nu,
@@ -915,9 +922,12 @@ impl<T: Real> Observer<T> {
     /// Keeps each variance at most its initial one: with nothing to observe (at rest, no
     /// flow) the random walks would otherwise grow it without bound, and the first readings
     /// after hours would throw k2 and the scales to their limits. Row and column are scaled
-    /// together (D P D), which keeps P positive definite.
+    /// together (D P D), which keeps P positive definite (and symmetric); every variance at
+    /// least 1e-12.
     fn cap_variances(&mut self) {
+        let floor = T::from_f64(1e-12);
         for i in 0..STATES {
+            self.p[i][i] = self.p[i][i].max(floor);
             let s = self.cfg.initial_sigma[i];
             let cap = s * s;
             if self.p[i][i] > cap {
@@ -927,19 +937,6 @@ impl<T: Real> Observer<T> {
                     self.p[j][i] = self.p[j][i] * f;
                 }
             }
-        }
-    }
-
-    fn symmetrize(&mut self) {
-        let half = T::from_f64(0.5);
-        let floor = T::from_f64(1e-12);
-        for i in 0..STATES {
-            for j in (i + 1)..STATES {
-                let v = (self.p[i][j] + self.p[j][i]) * half;
-                self.p[i][j] = v;
-                self.p[j][i] = v;
-            }
-            self.p[i][i] = self.p[i][i].max(floor);
         }
     }
 
@@ -963,15 +960,17 @@ impl<T: Real> Observer<T> {
                 .all(|(i, row)| row[i] > T::ZERO && row.iter().all(|v| v.is_finite()))
     }
 
-    /// Standard deviation of `jᵀ x` (linearised) for a `j` that only weighs the first four
-    /// states (speed, k2 and the scales: what every derived quantity depends on).
-    fn sd(&self, j: &Vector<T>) -> T {
-        let mut v = T::ZERO;
-        for a in 0..4 {
-            for b in 0..4 {
-                v += j[a] * self.p[a][b] * j[b];
-            }
-        }
+    /// Standard deviation of `jᵀ (ω, k2, s_H)` (linearised): what every derived quantity
+    /// depends on. The 3×3 block of P is symmetric: six products.
+    fn sd3(&self, j: &[T; 3]) -> T {
+        let p = &self.p;
+        let (a, b, c) = (j[SPEED], j[K2], j[HEAD_SCALE]);
+        let two = T::from_f64(2.0);
+        let v = a * a * p[SPEED][SPEED]
+            + b * b * p[K2][K2]
+            + c * c * p[HEAD_SCALE][HEAD_SCALE]
+            + two
+                * (a * b * p[SPEED][K2] + a * c * p[SPEED][HEAD_SCALE] + b * c * p[K2][HEAD_SCALE]);
         v.max(T::ZERO).sqrt()
     }
 
@@ -992,21 +991,25 @@ impl<T: Real> Observer<T> {
         let par = &self.cfg.params;
         // The flow through the water column's lag; the sensitivities are the root's.
         let (k2, q, s_h) = (x[K2], self.flow_now, x[HEAD_SCALE]);
-        let j_q = [h.dq[0], h.dq[1], h.dq[2], T::ZERO, T::ZERO, T::ZERO];
+        // Every derived quantity depends on (ω, k2, s_H) alone: sensitivities as 3-vectors.
+        let j_q = h.dq;
         let e_q = self.inertia_flow_sd();
         let e_p = two * k2 * k2 * q * e_q;
-        let mut j_p: Vector<T> = core::array::from_fn(|a| two * k2 * k2 * q * j_q[a]);
-        j_p[K2] += two * k2 * q * q;
+        let a_p = two * k2 * k2 * q;
+        let j_p = [a_p * j_q[0], a_p * j_q[1] + two * k2 * q * q, a_p * j_q[2]];
         // Pump head s_H F_H(ω, Q(ω, k2, s_H)).
         let head = s_h * h.head;
-        let mut j_h: Vector<T> = core::array::from_fn(|a| s_h * h.head_q * j_q[a]);
-        j_h[SPEED] += s_h * h.head_w;
-        j_h[HEAD_SCALE] += h.head;
+        let a_h = s_h * h.head_q;
+        let j_h = [
+            a_h * j_q[0] + s_h * h.head_w,
+            a_h * j_q[1],
+            a_h * j_q[2] + h.head,
+        ];
         let pipe = par.pipe_k1 * q * q;
-        let j_pipe: Vector<T> = core::array::from_fn(|a| two * par.pipe_k1 * q * j_q[a]);
         let rho_g = T::from_f64(RHO_G_W_PER_LPS_M);
         let power = rho_g * q * head;
-        let j_pow: Vector<T> = core::array::from_fn(|a| rho_g * (head * j_q[a] + q * j_h[a]));
+        let j_pow: [T; 3] = core::array::from_fn(|a| rho_g * (head * j_q[a] + q * j_h[a]));
+        let sd_q = self.sd3(&j_q);
         Estimate {
             speed_rpm: x[SPEED],
             flow_lps: q,
@@ -1019,14 +1022,14 @@ impl<T: Real> Observer<T> {
             hydraulic_power_w: power,
             load_torque_pct: x[TORQUE_SCALE] * h.torque,
             speed_sd_rpm: self.sd_state(SPEED),
-            flow_sd_lps: hypot(self.sd(&j_q), e_q),
-            pressure_sd_mca: hypot(self.sd(&j_p), e_p),
+            flow_sd_lps: hypot(sd_q, e_q),
+            pressure_sd_mca: hypot(self.sd3(&j_p), e_p),
             valve_k2_sd: self.sd_state(K2),
             head_scale_sd: self.sd_state(HEAD_SCALE),
             torque_scale_sd: self.sd_state(TORQUE_SCALE),
-            pump_head_sd_mca: self.sd(&j_h),
-            pipe_loss_sd_mca: self.sd(&j_pipe),
-            hydraulic_power_sd_w: self.sd(&j_pow),
+            pump_head_sd_mca: self.sd3(&j_h),
+            pipe_loss_sd_mca: (two * par.pipe_k1 * q).abs() * sd_q,
+            hydraulic_power_sd_w: self.sd3(&j_pow),
             pressure,
             flow,
             speed,

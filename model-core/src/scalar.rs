@@ -79,7 +79,7 @@ impl Real for f32 {
     }
     #[inline]
     fn sqrt(self) -> Self {
-        libm::sqrtf(self)
+        crate::dsp::sqrt_f32(self)
     }
     #[inline]
     fn abs(self) -> Self {
