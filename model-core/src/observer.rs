@@ -66,8 +66,11 @@ pub const PRESSURE_LAGGED: usize = 4;
 /// Index of the flow transmitter's lagged reading, l/s.
 pub const FLOW_LAGGED: usize = 5;
 
+/// Largest relative move of k2 in one measurement update (see [`Observer::step`]'s
+/// updates: a trust region for the linearisation).
+pub const MAX_K2_MOVE: f64 = 0.15;
 /// Longest sub-step of the mean's integration, s.
-pub const MAX_SUBSTEP_S: f64 = 0.025;
+pub const MAX_SUBSTEP_S: f64 = 0.05;
 /// Longest `dt` of one [`Observer::step`], s (the error message repeats it).
 pub const MAX_DT_S: f64 = 10.0;
 /// Water density × g, W per (l/s · m): hydraulic power P = 9.81 · Q (l/s) · H (m).
@@ -885,13 +888,24 @@ impl<T: Real> Observer<T> {
         // Held states are "considered", not estimated (Schmidt): zero gain, their variance
         // and correlations kept, so the estimate's σ still carries their uncertainty. The
         // Joseph form below is right for any gain.
-        let k: Vector<T> = core::array::from_fn(|a| {
+        let mut k: Vector<T> = core::array::from_fn(|a| {
             if self.held[a] {
                 T::ZERO
             } else {
                 self.p[a][i] / s
             }
         });
+        // A trust region on k2: the linearisation holds for a small move only, and a large
+        // one in a step overshoots (after a valve step, the model is far from linear in k2),
+        // so one update moves k2 by at most MAX_K2_MOVE of itself; the whole correction is
+        // scaled alike (its direction kept) and the Joseph form below stays right for the
+        // smaller gain. A large change is followed over a few steps.
+        let step = (k[K2] * nu).abs();
+        let allowed = T::from_f64(MAX_K2_MOVE) * self.x[K2];
+        if step > allowed {
+            let f = allowed / step;
+            k.iter_mut().for_each(|v| *v = *v * f);
+        }
         for (a, ka) in k.iter().enumerate() {
             self.x[a] += *ka * nu;
         }
