@@ -7,12 +7,16 @@
 //!
 //! State (6): speed ω (rpm), valve coefficient k2 (mca^½·s/l), pump-head scale `s_H`, load-torque
 //! scale `s_T` (both 1 for the paper's fits), and the two transmitters' lagged readings
-//! `p_f` (mca) and `q_f` (l/s). Flow is algebraic, as in the white-box bench: the largest
-//! non-negative root of `g(Q) = s_H F_H(ω, Q) − (k1 + k2²) Q² + c`; the outlet pressure is
-//! `Hs = k2² Q² − c`.
+//! `p_f` (mca) and `q_f` (l/s). The flow Q follows the largest non-negative root Q* of the
+//! flow balance `g(Q) = s_H F_H(ω, Q) − (k1 + k2²) Q² + c` through the water column's inertia
+//! (`L dQ/dt = g(Q)`, linearised: a first-order lag of `L / |∂g/∂Q|`, carried beside the
+//! state, its uncertainty in the variances); the outlet pressure is `Hs = k2² Q² − c`. The
+//! drive delivers Te(u) through its torque loop's first-order lag.
 //!
 //! ```text
-//! dω/dt   = K (Te(u) − s_T F_T(ω, Q))        K = T_nom/100/J · 30/π ≈ 42.95 rpm/s per %
+//! dω/dt   = K (Te_d − s_T F_T(ω, Q))         K = T_nom/100/J · 30/π ≈ 42.95 rpm/s per %
+//! dTe_d/dt = (Te(u) − Te_d) / τ_d             the drive's torque loop
+//! dQ/dt   = (Q* − Q) / (L / |∂g/∂Q|)           the water column
 //! dk2/dt, ds_H/dt, ds_T/dt = white noise      (random walks: the valve moves, curves drift)
 //! dp_f/dt = (Hs − p_f) / τ_p                  pressure transmitter lag
 //! dq_f/dt = (Q − q_f) / τ_q                   flow transmitter lag
@@ -21,14 +25,17 @@
 //! Measurements are the lagged readings and the drive's speed, so each is one state:
 //! pressure `y = p_f`, flow `y = q_f`, VFD speed `y = ω`. They are applied one at a time
 //! (sequential scalar updates, Joseph form), each only when it arrives: any of them may be
-//! missing for any length of time, and the filter runs on the others and on the model.
+//! missing for any length of time, and the filter runs on the others and on the model. A
+//! channel missing for [`ObserverConfig::lost_after_s`] is lost, and the curve scales it made
+//! observable are held (see [`Observer::held`]).
 //!
 //! # Discretisation
 //!
 //! [`Observer::step`] advances by `dt` with the torque reference held: the mean by Heun's
-//! method in sub-steps of at most [`MAX_SUBSTEP_S`] (the lags exactly, for a target held over
-//! a sub-step), the covariance once per call by the transition matrix linearised at the start
-//! (second order in speed, exact in the lags), plus process noise. Then the measurements.
+//! method in sub-steps of at most [`MAX_SUBSTEP_S`] (the drive's lag exactly, the water column
+//! and the transmitters exactly for a target held over a sub-step), the covariance once per
+//! call by the transition matrix linearised at the start (second order in speed, exact in the
+//! lags), plus process noise. Then the measurements.
 //!
 //! # Robustness
 //!
@@ -37,9 +44,10 @@
 //! rpm: a transmitter at 2 mA, a NaN) is not used. An innovation whose normalised square
 //! exceeds [`ObserverConfig::gate_sigma`]² is rejected as an outlier, unless the channel has
 //! been rejected [`ObserverConfig::max_rejections`] times in a row: then the change is taken
-//! as real (the valve moved) and, for pressure and flow, k2's variance is raised by [`ObserverConfig::k2_jump_sigma`]²
-//! before the update, so the filter re-converges in a few samples instead of tens of seconds.
-//! The covariance is kept symmetric, its diagonal positive; k2 and the scales stay within
+//! as real (the valve moved) and, for pressure and flow, k2's variance is raised by
+//! [`ObserverConfig::k2_jump_sigma`]² before the update, so the filter re-converges in a few
+//! samples instead of tens of seconds; one update moves k2 by at most [`MAX_K2_MOVE`] of
+//! itself. The covariance is kept symmetric, its diagonal positive; k2 and the scales stay within
 //! their configured ranges; a non-finite result restores the last good estimate. No output
 //! is ever NaN.
 
@@ -667,7 +675,11 @@ impl<T: Real> Observer<T> {
         }
     }
 
-    /// States held in the last step (see [`Self::decide_holds`]): indices as [`SPEED`], [`K2`], ….
+    /// States held in the last step, indices as [`SPEED`], [`K2`], …: both curve scales while
+    /// flow or speed is lost, the head scale while pressure is (a channel is lost after
+    /// [`ObserverConfig::lost_after_s`] without a plausible value, and found again once it has
+    /// been back as long). A held state is "considered", not estimated: zero gain, no random
+    /// walk, its variance and correlations kept.
     pub fn held(&self) -> &[bool; STATES] {
         &self.held
     }
