@@ -1,5 +1,5 @@
-//! Puts the memory layout where the cortex-m-rt linker script finds it, as the firmware's
-//! build script does for its QEMU board (STM32F405 as QEMU's netduinoplus2 models it).
+//! Puts the memory layout where the cortex-m-rt linker script finds it, as `boards/qemu`'s
+//! build script does (STM32F405 as QEMU's netduinoplus2 models it).
 use std::{env, fs, path::PathBuf};
 
 fn main() {

@@ -161,14 +161,15 @@ fn time_constant(bench: &WhiteBox<f64>, from: f64, to: f64) -> f64 {
 }
 
 #[test]
-fn bench_md_table_is_reproduced() {
-    // BENCH.md, "Units": what this unit system gives, as printed there (rounded).
+fn the_units_table_is_reproduced() {
+    // The README's "What this model gives against the paper's own operating points": what
+    // the unit system of "Units (the paper prints none)" gives, as printed there (rounded).
     let bench = WhiteBox::<f64>::paper();
     let at = |u: f64| bench.signals(&bench.steady_state(u).unwrap());
     let close = |x: f64, printed: f64, half_ulp: f64, what: &str| {
         assert!(
             (x - printed).abs() <= half_ulp,
-            "{what}: {x} vs BENCH.md {printed}"
+            "{what}: {x} vs the printed {printed}"
         );
     };
     close(at(5.0).speed_rpm, 320.0, 5.0, "speed at 5 % (≈ 320 rpm)");

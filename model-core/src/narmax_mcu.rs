@@ -39,7 +39,7 @@
 //!   [`crate::dsp`]) in 32 bits onto the bias. The exponent is the smallest with every
 //!   mantissa ≤ 32767 **and** `|bias| + 32768·Σ|mantissa| ≤ 2³¹ − 1`, so the accumulator
 //!   cannot overflow for any input.
-//! - **tanh**: the pre-activation rounded to Q16, then the 513-entry Q15 table on [0, 8]
+//! - **tanh**: the pre-activation rounded to Q16, then the 1 025-entry Q15 table on [−8, 8]
 //!   with linear interpolation, [`tanh_q15`], within [`TANH_Q15_MAX_ERROR`] of tanh.
 //! - **Output**: i16 mantissas with one exponent, folded so that the accumulator is the
 //!   output's Q15 code over y's range (fed back after rounding and saturation) and the

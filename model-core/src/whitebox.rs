@@ -240,7 +240,7 @@ impl<T: Real> WhiteBox<T> {
             return Err(BenchError::InvalidParameter("non-finite load"));
         }
         if valve_k2 < T::ZERO {
-            return Err(BenchError::InvalidParameter("k1 and k2 must be >= 0"));
+            return Err(BenchError::InvalidParameter("k2 must be >= 0"));
         }
         self.params.valve_k2 = valve_k2;
         self.params.static_head_c_mca = static_head_c_mca;
