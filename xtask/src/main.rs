@@ -1083,10 +1083,10 @@ mod line {
         }
 
         /// The sample counter (input 9: +1 per 50 ms pressure sample).
-        fn samples(&self) -> Result<u16> {
+        fn samples(&self, when: &str) -> Result<u16> {
             self.inputs(9, 1, Duration::from_secs(1))?
                 .map(|r| r[0])
-                .ok_or_else(|| "no answer to a read of the sample counter".to_string())
+                .ok_or_else(|| format!("no answer to a read of the sample counter ({when})"))
         }
     }
 
@@ -1147,7 +1147,7 @@ mod line {
             }
             std::thread::sleep(Duration::from_millis(200));
         }
-        let (s0, t0) = (port.samples()?, Instant::now());
+        let (s0, t0) = (port.samples("before the flood")?, Instant::now());
         let (mut sent, mut answered, mut status_or) = (0u32, 0u32, 0u16);
         let mut status_and = 0xFFFFu16;
         while t0.elapsed() < Duration::from_secs(seconds) {
@@ -1171,7 +1171,7 @@ mod line {
                 }
             }
         }
-        let (s1, wall) = (port.samples()?, t0.elapsed().as_secs_f64());
+        let (s1, wall) = (port.samples("after the flood")?, t0.elapsed().as_secs_f64());
         let rate = f64::from(s1.wrapping_sub(s0)) / (wall * 20.0) - 1.0;
         // The firmware logs its margins once a second; the last line covers the flood.
         std::thread::sleep(Duration::from_millis(1500));
@@ -1228,7 +1228,7 @@ mod line {
         // 1. Traffic does not slow the loop: 50 reads a second for 10 s, sample counter
         //    (20 per second) against wall time.
         let port = Port::open(pty)?;
-        let (s0, t0) = (port.samples()?, Instant::now());
+        let (s0, t0) = (port.samples("before 10 s of reads")?, Instant::now());
         let mut reads = 0;
         while t0.elapsed() < Duration::from_secs(10) {
             let t = Instant::now();
@@ -1237,7 +1237,10 @@ mod line {
             reads += 1;
             std::thread::sleep(Duration::from_millis(20).saturating_sub(t.elapsed()));
         }
-        let (s1, wall) = (port.samples()?, t0.elapsed().as_secs_f64());
+        let (s1, wall) = (
+            port.samples("after 10 s of reads")?,
+            t0.elapsed().as_secs_f64(),
+        );
         let rate = f64::from(s1.wrapping_sub(s0)) / (wall * 20.0) - 1.0;
         report.push_str(&format!(
             "{reads} reads in {wall:.1} s ({:.0}/s): loop at {:+.2} % of wall time (sample counter)\n",
@@ -1296,7 +1299,7 @@ mod line {
         drop(port);
         // 4. A client that sends and never reads (answers pile up: 25 KB in 12 s) does not
         //    stop the controller.
-        let s0 = Port::open(pty)?.samples()?;
+        let s0 = Port::open(pty)?.samples("before a client that reads nothing")?;
         let t = Instant::now();
         let flood = Port::open(pty)?;
         let mut sent = 0;
@@ -1308,7 +1311,7 @@ mod line {
         drop(flood);
         std::thread::sleep(Duration::from_millis(100));
         let after = Port::open(pty)?;
-        let s1 = after.samples()?;
+        let s1 = after.samples("after a client that read nothing")?;
         let wall = t.elapsed().as_secs_f64();
         let rate = f64::from(s1.wrapping_sub(s0)) / (wall * 20.0) - 1.0;
         report.push_str(&format!(
