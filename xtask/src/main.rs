@@ -1347,6 +1347,25 @@ mod line {
     }
 }
 
+/// The two 20 s QEMU runs (NARMAX f32 and Q15) against the same loop replayed on the host.
+fn replay(elf: &Path) -> Result {
+    eprintln!("==> QEMU runs against the host replay (netduinoplus2, -icount shift=0,sleep=off)");
+    const RUN_MS: u32 = 20_000;
+    for narmax in ["f32", "q15"] {
+        let args = [
+            "mode=2".to_string(),
+            format!("narmax={narmax}"),
+            format!("run_ms={}", RUN_MS + 1),
+        ];
+        let out = qemu_log(elf, &args)?;
+        let n = check_golden(&out, RUN_MS)?;
+        println!(
+            "QEMU run, NARMAX {narmax}: {n} log lines (white-box, measured, NARMAX, residuals) equal the host replay, bit for bit"
+        );
+    }
+    Ok(())
+}
+
 fn test() -> Result {
     let start = Instant::now();
     run("rustfmt", cargo().args(["fmt", "--all", "--check"]))?;
@@ -1403,20 +1422,7 @@ fn test() -> Result {
     build_firmware(Board::Qemu)?;
     eprintln!("==> on-target checks in QEMU (boards/qemu selftest)");
     print!("{}", selftest()?);
-    eprintln!("==> QEMU runs against the host replay (netduinoplus2, -icount shift=0,sleep=off)");
-    const RUN_MS: u32 = 20_000;
-    for narmax in ["f32", "q15"] {
-        let args = [
-            "mode=2".to_string(),
-            format!("narmax={narmax}"),
-            format!("run_ms={}", RUN_MS + 1),
-        ];
-        let out = qemu_log(&elf, &args)?;
-        let n = check_golden(&out, RUN_MS)?;
-        println!(
-            "QEMU run, NARMAX {narmax}: {n} log lines (white-box, measured, NARMAX, residuals) equal the host replay, bit for bit"
-        );
-    }
+    replay(&elf)?;
     eprintln!("==> end to end: QEMU in real time, SCADA on a pty, mbpoll as the client");
     print!("{}", e2e::run(&elf)?);
     eprintln!("==> SCADA flooded, the VFD on USART2 busy: in real time, then -icount shift=0");
@@ -1446,11 +1452,15 @@ fn main() -> ExitCode {
             print!("{}", line::flood(&firmware_elf(Board::Qemu), FLOOD_S, true)?);
             Ok(())
         }),
+        Some("replay") => build_firmware(Board::Qemu).and_then(|()| {
+            print!("{}", selftest()?);
+            replay(&firmware_elf(Board::Qemu))
+        }),
         Some("e2e") => build_firmware(Board::Qemu).and_then(|()| {
             print!("{}", e2e::run(&firmware_elf(Board::Qemu))?);
             Ok(())
         }),
-        _ => Err(format!("usage: cargo xtask <qemu|bench|test|e2e|flood>\n  qemu   build the firmware and run it in QEMU on the virtual bench\n  bench  the kernels' instructions per call on the MCU, image sizes, checked against bench/baseline.json and the budgets\n  test   fmt, clippy, tests, the bench and its budgets, QEMU runs against the host, mbpoll end to end\n  e2e    only the mbpoll end-to-end test\n  flood  only the margins under a SCADA flood with the VFD link busy\n{QEMU_USAGE}\n{BENCH_USAGE}")),
+        _ => Err(format!("usage: cargo xtask <qemu|bench|test|replay|e2e|flood>\n  qemu   build the firmware and run it in QEMU on the virtual bench\n  bench  the kernels' instructions per call on the MCU, image sizes, checked against bench/baseline.json and the budgets\n  test   fmt, clippy, tests, the bench and its budgets, QEMU runs against the host, mbpoll end to end\n  replay only the on-target checks and the QEMU runs against the host replay\n  e2e    only the mbpoll end-to-end test\n  flood  only the margins under a SCADA flood with the VFD link busy\n{QEMU_USAGE}\n{BENCH_USAGE}")),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
