@@ -14,7 +14,7 @@ pb excite --seed 3 --seconds 1200 --ts-ms 100 --output "$d/u_f.csv"
 pb bench-data --input "$d/u_f.csv" --seed 13 --output "$d/train_flow.csv"
 pb identify --data "$d/train_flow.csv" --target flow --na 7 --nb 7 --hidden 6 --epochs 40 --seed 1 --output models/flow.json
 # The firmware compiles these in.
-pb export --weights models/pressure.json --output firmware/src/models/pressure.rs
-pb export --weights models/flow.json --output firmware/src/models/flow.rs
-rustfmt --edition 2021 firmware/src/models/pressure.rs firmware/src/models/flow.rs
+pb export --weights models/pressure.json --output models/src/pressure.rs
+pb export --weights models/flow.json --output models/src/flow.rs
+rustfmt --edition 2021 models/src/pressure.rs models/src/flow.rs
 # The training data stays in target/models-data (not committed; remade by this script).

@@ -9,11 +9,7 @@ use controller::modbus::{crc16, Frame};
 use controller::scada::{Mode, Status};
 use model_core::WhiteBox;
 
-/// The firmware's models, the very files it compiles in.
-#[path = "../../firmware/src/models/flow.rs"]
-mod flow_model;
-#[path = "../../firmware/src/models/pressure.rs"]
-mod pressure_model;
+use pump_models::{flow as flow_model, pressure as pressure_model};
 
 type Board = VirtualBoard<
     { pressure_model::FRAMES },

@@ -22,7 +22,7 @@
 //! masked (the logger masks them while it writes a frame): [`Margin`] measures both, and the
 //! control task's longest run.
 //!
-//! The NARMAX models are `src/models/*.rs`, made by `pumpbench export`.
+//! The NARMAX models are the `pump-models` crate (compile-time data made by `pumpbench export`).
 #![no_std]
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
@@ -33,11 +33,8 @@ pub use controller::scada::Published;
 use core::sync::atomic::{AtomicU32, Ordering};
 use model_core::narmax::mcu::build_period_ms;
 
-/// The NARMAX models compiled in (`pumpbench export`).
-pub mod models {
-    pub mod flow;
-    pub mod pressure;
-}
+/// The NARMAX models compiled in (the `pump-models` crate, made by `pumpbench export`).
+pub use pump_models as models;
 
 /// Pressure model period, ms.
 pub const PRESSURE_MS: u32 = build_period_ms(models::pressure::SAMPLE_PERIOD_S);

@@ -8,10 +8,7 @@ use model_core::observer::{Measurements, Observer, ObserverConfig};
 use model_core::{Real, Scheme, WhiteBox};
 use std::hint::black_box;
 
-#[path = "../../firmware/src/models/flow.rs"]
-mod flow_model;
-#[path = "../../firmware/src/models/pressure.rs"]
-mod pressure_model;
+use pump_models::{flow as flow_model, pressure as pressure_model};
 
 /// Torques that change every call: 31 values between 20 and 80 %.
 fn torque(k: u32) -> f32 {
@@ -22,7 +19,8 @@ fn narmax(c: &mut Criterion) {
     let mut g = c.benchmark_group("narmax");
     macro_rules! model {
         ($name:literal, $m:ident) => {{
-            let generic32 = $m::model().unwrap();
+            let generic32 =
+                Narmax::<f32, { $m::INPUTS }, { $m::HIDDEN }>::from_nnsysid(&$m::MODEL).unwrap();
             let generic64: Narmax<f64, { $m::INPUTS }, { $m::HIDDEN }> = Narmax::new(
                 $m::LAGS,
                 $m::HIDDEN,

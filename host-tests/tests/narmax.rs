@@ -6,11 +6,7 @@ use model_core::excitation::SplitMix64;
 use model_core::narmax::mcu::{NarxF32, NarxQ15, NnsysidModel};
 use model_core::narmax::{Lags, Narmax, Scaling};
 
-#[path = "../../firmware/src/models/flow.rs"]
-mod flow_model;
-/// The firmware's models, the very files it compiles in.
-#[path = "../../firmware/src/models/pressure.rs"]
-mod pressure_model;
+use pump_models::{flow as flow_model, pressure as pressure_model};
 
 /// A random network of the paper's pressure size, scaled like a pressure model, and its
 /// model-core twins. Weights uniform in ±`w`, as a trained network's are.

@@ -13,7 +13,8 @@
 #![no_std]
 #![warn(missing_docs)]
 
-pub mod models;
+/// The firmware's NARMAX models (the `pump-models` crate).
+pub use pump_models as models;
 pub mod plain;
 
 use core::hint::black_box;

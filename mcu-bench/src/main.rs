@@ -121,11 +121,11 @@ fn empty_call(c: &mut Cost, n: u32) -> Result<(), Error> {
 
 fn pressure(
 ) -> Result<Narmax<f32, { models::pressure::INPUTS }, { models::pressure::HIDDEN }>, Error> {
-    models::pressure::model().map_err(|_| "pressure model refused")
+    Narmax::from_nnsysid(&models::pressure::MODEL).map_err(|_| "pressure model refused")
 }
 
 fn flow() -> Result<Narmax<f32, { models::flow::INPUTS }, { models::flow::HIDDEN }>, Error> {
-    models::flow::model().map_err(|_| "flow model refused")
+    Narmax::from_nnsysid(&models::flow::MODEL).map_err(|_| "flow model refused")
 }
 
 /// model-core's MCU f32 pass (`NarxF32`, the firmware's static): free-run steps from the

@@ -23,7 +23,6 @@
 
 use crate::scalar::Real;
 
-#[path = "narmax_mcu.rs"]
 pub mod mcu;
 
 /// Largest input delay `nk` supported.
@@ -259,8 +258,9 @@ impl<T: Real, const N: usize, const H: usize> Narmax<T, N, H> {
     ///
     /// - `w1`: hidden × (na + nb + nc + 1), row-major, bias last in each row;
     /// - `w2`: hidden + 1, bias last;
-    /// - `u_range`, `y_range`: training ranges in physical units (regressors are clamped to
-    ///   them), `[min, max]` with min < max.
+    /// - `u_scale`, `u_range`: input (torque reference) scaling and training range, %;
+    /// - `y_scale`, `y_range`: output scaling and training range in the output's unit
+    ///   (regressors are clamped to the ranges), `[min, max]` with min < max.
     ///
     /// Every value must be finite and both stds > 0.
     #[allow(clippy::too_many_arguments)]
@@ -274,6 +274,49 @@ impl<T: Real, const N: usize, const H: usize> Narmax<T, N, H> {
         u_range: [T; 2],
         y_range: [T; 2],
     ) -> Result<Self, NarmaxError> {
+        let shape = (w1.len(), w2.len());
+        Self::from_parts(
+            lags,
+            hidden,
+            shape,
+            |i| w1[i],
+            |i| w2[i],
+            [u_scale, y_scale],
+            [u_range, y_range],
+        )
+    }
+
+    /// The generic pass of a model in NNSYSID form (the f64 data `pumpbench export` writes),
+    /// every value rounded to `T` once (for f32: the bits the MCU passes start from). The
+    /// host's reference and baseline for the MCU passes built from the same data.
+    pub fn from_nnsysid(m: &mcu::NnsysidModel) -> Result<Self, NarmaxError> {
+        let t = T::from_f64;
+        let s = |s: Scaling<f64>| Scaling {
+            mean: t(s.mean),
+            std: t(s.std),
+        };
+        let r = |r: [f64; 2]| [t(r[0]), t(r[1])];
+        Self::from_parts(
+            m.lags,
+            m.hidden,
+            (m.w1.len(), m.w2.len()),
+            |i| t(m.w1[i]),
+            |i| t(m.w2[i]),
+            [s(m.u_scale), s(m.y_scale)],
+            [r(m.u_range), r(m.y_range)],
+        )
+    }
+
+    /// [`Self::new`] with the weights read through `w1(i)`, `w2(i)` (`shape`: their lengths).
+    fn from_parts(
+        lags: Lags,
+        hidden: usize,
+        shape: (usize, usize),
+        w1: impl Fn(usize) -> T,
+        w2: impl Fn(usize) -> T,
+        [u_scale, y_scale]: [Scaling<T>; 2],
+        [u_range, y_range]: [[T; 2]; 2],
+    ) -> Result<Self, NarmaxError> {
         let n = lags.inputs();
         if lags.nk > MAX_NK || n == 0 || hidden == 0 {
             return Err(NarmaxError::BadLags);
@@ -281,15 +324,15 @@ impl<T: Real, const N: usize, const H: usize> Narmax<T, N, H> {
         if n > N || hidden > H || lags.na > N || lags.nb > N || lags.nc > N {
             return Err(NarmaxError::TooLarge);
         }
-        if w1.len() != hidden * (n + 1) || w2.len() != hidden + 1 {
+        if shape != (hidden * (n + 1), hidden + 1) {
             return Err(NarmaxError::WrongShape);
         }
-        let finite = w1
-            .iter()
-            .chain(w2)
-            .chain(&[u_scale.mean, u_scale.std, y_scale.mean, y_scale.std])
-            .chain(&u_range)
-            .chain(&y_range)
+        let finite = (0..shape.0)
+            .map(&w1)
+            .chain((0..shape.1).map(&w2))
+            .chain([u_scale.mean, u_scale.std, y_scale.mean, y_scale.std])
+            .chain(u_range)
+            .chain(y_range)
             .all(|x| x.is_finite());
         if !finite
             || !(u_scale.std > T::ZERO)
@@ -305,17 +348,19 @@ impl<T: Real, const N: usize, const H: usize> Narmax<T, N, H> {
             w1: [[T::ZERO; N]; H],
             b1: [T::ZERO; H],
             w2: [T::ZERO; H],
-            b2: w2[hidden],
+            b2: w2(hidden),
             u_scale,
             y_scale,
             u_range: [u_scale.scale(u_range[0]), u_scale.scale(u_range[1])],
             y_range: [y_scale.scale(y_range[0]), y_scale.scale(y_range[1])],
         };
         for j in 0..hidden {
-            let row = &w1[j * (n + 1)..(j + 1) * (n + 1)];
-            m.w1[j][..n].copy_from_slice(&row[..n]);
-            m.b1[j] = row[n];
-            m.w2[j] = w2[j];
+            let row = j * (n + 1);
+            for i in 0..n {
+                m.w1[j][i] = w1(row + i);
+            }
+            m.b1[j] = w1(row + n);
+            m.w2[j] = w2(j);
         }
         Ok(m)
     }

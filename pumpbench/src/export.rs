@@ -65,10 +65,9 @@ pub fn run(m: &ModelFile, source: &str, w: &mut dyn Write) -> Result<(), Failure
          //!\n\
          //! [`F32`] and [`Q15`] are the passes the firmware runs, built from the weights below by\n\
          //! the compiler (model-core's `const fn`s): checked, laid out and quantised at build time.\n\
-         // Each includer uses part of this (the firmware: the statics; tests: the rest).\n\
-         #![allow(dead_code)]\n\n\
-         use model_core::narmax::mcu::{{to_f32, NarxF32, NarxQ15, NnsysidModel}};\n\
-         use model_core::narmax::{{Lags, Narmax, NarmaxError, Scaling}};\n\n\
+         //! The host's generic pass of the same model is `Narmax::from_nnsysid(&MODEL)`.\n\n\
+         use model_core::narmax::mcu::{{NarxF32, NarxQ15, NnsysidModel}};\n\
+         use model_core::narmax::{{Lags, Scaling}};\n\n\
          /// Regressors, na + nb + nc.\npub const INPUTS: usize = {n};\n\
          /// Frames of history of the MCU passes, max(na, nk - 1 + nb).\npub const FRAMES: usize = {frames};\n\
          /// Hidden tanh units.\npub const HIDDEN: usize = {h};\n\
@@ -85,15 +84,7 @@ pub fn run(m: &ModelFile, source: &str, w: &mut dyn Write) -> Result<(), Failure
          lags: LAGS,\n    hidden: HIDDEN,\n    w1: &W1,\n    w2: &W2,\n    u_scale: U_SCALING,\n    \
          y_scale: Y_SCALING,\n    u_range: U_RANGE,\n    y_range: Y_RANGE,\n}};\n\n\
          /// The f32 pass.\npub static F32: NarxF32<FRAMES, HIDDEN> = NarxF32::build(&MODEL);\n\
-         /// The Q15 pass.\npub static Q15: NarxQ15<FRAMES, HIDDEN> = NarxQ15::build(&MODEL);\n\n\
-         /// The generic f32 pass (model-core's `Narmax`, `libm::tanhf`): the host's reference and\n\
-         /// the bench's baseline; not in the firmware.\n\
-         pub fn model() -> Result<Narmax<f32, INPUTS, HIDDEN>, NarmaxError> {{\n    \
-         const W1_F32: [f32; {w1n}] = to_f32(&W1);\n    \
-         const W2_F32: [f32; {h1}] = to_f32(&W2);\n    \
-         let s = |s: Scaling<f64>| Scaling {{ mean: s.mean as f32, std: s.std as f32 }};\n    \
-         let r = |r: [f64; 2]| [r[0] as f32, r[1] as f32];\n    \
-         Narmax::new(LAGS, HIDDEN, &W1_F32, &W2_F32, s(U_SCALING), s(Y_SCALING), r(U_RANGE), r(Y_RANGE))\n}}\n",
+         /// The Q15 pass.\npub static Q15: NarxQ15<FRAMES, HIDDEN> = NarxQ15::build(&MODEL);\n",
         na = l.na,
         nb = l.nb,
         nc = l.nc,

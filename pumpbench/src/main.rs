@@ -261,7 +261,7 @@ enum Command {
         output: Option<PathBuf>,
     },
     /// A model file as Rust source for the firmware (f32 constants and a `model()`
-    /// constructor); e.g. `--output firmware/src/models/pressure.rs`, then build the firmware.
+    /// constructor); e.g. `--output models/src/pressure.rs`, then build the firmware.
     Export {
         /// Model file.
         #[arg(long)]

@@ -18,11 +18,7 @@ mod bench;
 mod bridge;
 mod defmt_log;
 
-/// The firmware's NARMAX models, the very files it compiles in.
-#[path = "../../firmware/src/models/flow.rs"]
-mod flow_model;
-#[path = "../../firmware/src/models/pressure.rs"]
-mod pressure_model;
+use pump_models::{flow as flow_model, pressure as pressure_model};
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitCode, Stdio};
 use std::time::Instant;

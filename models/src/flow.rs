@@ -4,11 +4,10 @@
 //!
 //! [`F32`] and [`Q15`] are the passes the firmware runs, built from the weights below by
 //! the compiler (model-core's `const fn`s): checked, laid out and quantised at build time.
-// Each includer uses part of this (the firmware: the statics; tests: the rest).
-#![allow(dead_code)]
+//! The host's generic pass of the same model is `Narmax::from_nnsysid(&MODEL)`.
 
-use model_core::narmax::mcu::{to_f32, NarxF32, NarxQ15, NnsysidModel};
-use model_core::narmax::{Lags, Narmax, NarmaxError, Scaling};
+use model_core::narmax::mcu::{NarxF32, NarxQ15, NnsysidModel};
+use model_core::narmax::{Lags, Scaling};
 
 /// Regressors, na + nb + nc.
 pub const INPUTS: usize = 14;
@@ -159,25 +158,3 @@ pub const MODEL: NnsysidModel<'static> = NnsysidModel {
 pub static F32: NarxF32<FRAMES, HIDDEN> = NarxF32::build(&MODEL);
 /// The Q15 pass.
 pub static Q15: NarxQ15<FRAMES, HIDDEN> = NarxQ15::build(&MODEL);
-
-/// The generic f32 pass (model-core's `Narmax`, `libm::tanhf`): the host's reference and
-/// the bench's baseline; not in the firmware.
-pub fn model() -> Result<Narmax<f32, INPUTS, HIDDEN>, NarmaxError> {
-    const W1_F32: [f32; 90] = to_f32(&W1);
-    const W2_F32: [f32; 7] = to_f32(&W2);
-    let s = |s: Scaling<f64>| Scaling {
-        mean: s.mean as f32,
-        std: s.std as f32,
-    };
-    let r = |r: [f64; 2]| [r[0] as f32, r[1] as f32];
-    Narmax::new(
-        LAGS,
-        HIDDEN,
-        &W1_F32,
-        &W2_F32,
-        s(U_SCALING),
-        s(Y_SCALING),
-        r(U_RANGE),
-        r(Y_RANGE),
-    )
-}
