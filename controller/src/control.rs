@@ -38,7 +38,7 @@ use crate::vfd::{VfdMap, VfdReadings};
 use model_core::excitation::McuPulses;
 use model_core::monitor::{Monitor, MonitorConfig, MonitorInputs};
 use model_core::narmax::mcu::{NarxF32, NarxF32State, NarxQ15, NarxQ15State, MAX_PERIOD_MS};
-use model_core::narmax::{NarmaxError, NarmaxOutput};
+use model_core::narmax::{NarmaxError, NarmaxOutput, Predictor};
 use model_core::observer::{Measurements, Observer, ObserverConfig, ObserverError};
 use model_core::{BenchError, BenchState, Scheme, Signals, WhiteBox};
 

@@ -1,9 +1,10 @@
 //! Host timing of the kernels the MCU runs, in f32 and f64 where both exist (criterion):
 //! `cargo bench -p host-tests --bench kernels`. The MCU's own counts (instructions under QEMU)
 //! come from `cargo xtask bench`; these are host nanoseconds, for the host tools.
-use criterion::{criterion_group, criterion_main, BatchSize, Criterion};
-use model_core::narmax::mcu::{tanh_f32, tanh_q15, NarxF32, NarxQ15};
-use model_core::narmax::Narmax;
+use criterion::measurement::WallTime;
+use criterion::{criterion_group, criterion_main, BatchSize, BenchmarkGroup, Criterion};
+use model_core::narmax::mcu::{tanh_f32, tanh_q15};
+use model_core::narmax::{Narmax, Predictor};
 use model_core::observer::{Measurements, Observer, ObserverConfig};
 use model_core::{Real, Scheme, WhiteBox};
 use std::hint::black_box;
@@ -15,55 +16,34 @@ fn torque(k: u32) -> f32 {
     20.0 + (k % 31) as f32 * 2.0
 }
 
+/// Free-run steps of one pass, the torque changing every call.
+fn free_run<P: Predictor>(g: &mut BenchmarkGroup<'_, WallTime>, name: &str, p: &P) {
+    let mut st = p.state_at(P::Value::from_f64(50.0), p.output_mean());
+    let mut k = 0;
+    g.bench_function(name, |b| {
+        b.iter(|| {
+            k += 1;
+            black_box(p.simulate_step(&mut st, P::Value::from_f64(f64::from(torque(k)))))
+        })
+    });
+}
+
 fn narmax(c: &mut Criterion) {
     let mut g = c.benchmark_group("narmax");
     macro_rules! model {
         ($name:literal, $m:ident) => {{
+            let generic64 =
+                Narmax::<f64, { $m::INPUTS }, { $m::HIDDEN }>::from_nnsysid(&$m::MODEL).unwrap();
             let generic32 =
                 Narmax::<f32, { $m::INPUTS }, { $m::HIDDEN }>::from_nnsysid(&$m::MODEL).unwrap();
-            let generic64: Narmax<f64, { $m::INPUTS }, { $m::HIDDEN }> = Narmax::new(
-                $m::LAGS,
-                $m::HIDDEN,
-                &$m::W1,
-                &$m::W2,
-                $m::U_SCALING,
-                $m::Y_SCALING,
-                $m::U_RANGE,
-                $m::Y_RANGE,
-            )
-            .unwrap();
-            let y0 = $m::Y_SCALING.mean;
-            let mut k = 0;
-            let mut st = generic64.state_at(50.0, y0);
-            g.bench_function(concat!($name, "/generic_f64"), |b| {
-                b.iter(|| {
-                    k += 1;
-                    black_box(generic64.simulate_step(&mut st, f64::from(torque(k))))
-                })
-            });
-            let mut st = generic32.state_at(50.0, y0 as f32);
-            g.bench_function(concat!($name, "/generic_f32_libm_tanhf"), |b| {
-                b.iter(|| {
-                    k += 1;
-                    black_box(generic32.simulate_step(&mut st, torque(k)))
-                })
-            });
-            let f: &NarxF32<{ $m::FRAMES }, { $m::HIDDEN }> = &$m::F32;
-            let mut st = f.state_at(50.0, y0 as f32);
-            g.bench_function(concat!($name, "/mcu_f32"), |b| {
-                b.iter(|| {
-                    k += 1;
-                    black_box(f.simulate_step(&mut st, torque(k)))
-                })
-            });
-            let q: &NarxQ15<{ $m::FRAMES }, { $m::HIDDEN }> = &$m::Q15;
-            let mut st = q.state_at(50.0, y0 as f32);
-            g.bench_function(concat!($name, "/mcu_q15"), |b| {
-                b.iter(|| {
-                    k += 1;
-                    black_box(q.simulate_step(&mut st, torque(k)))
-                })
-            });
+            free_run(&mut g, concat!($name, "/generic_f64"), &generic64);
+            free_run(
+                &mut g,
+                concat!($name, "/generic_f32_libm_tanhf"),
+                &generic32,
+            );
+            free_run(&mut g, concat!($name, "/mcu_f32"), &$m::F32);
+            free_run(&mut g, concat!($name, "/mcu_q15"), &$m::Q15);
         }};
     }
     model!("pressure", pressure_model);

@@ -4,7 +4,7 @@
 use host_tests::narmax_ref::RefNarmax;
 use model_core::excitation::SplitMix64;
 use model_core::narmax::mcu::{NarxF32, NarxQ15, NnsysidModel};
-use model_core::narmax::{Lags, Narmax, Scaling};
+use model_core::narmax::{Lags, Narmax, Predictor, Scaling};
 
 use pump_models::{flow as flow_model, pressure as pressure_model};
 

@@ -122,6 +122,7 @@ pub mod parts {
     use crate::models::{flow, pressure};
     use core::hint::black_box;
     use model_core::monitor::{Monitor, MonitorConfig, MonitorInputs};
+    use model_core::narmax::Predictor;
     use model_core::observer::{Measurements, Observer, ObserverConfig};
     use model_core::{BenchState, Scheme, WhiteBox};
 

@@ -30,8 +30,8 @@ use model_core::dsp::{smlad, smlad_portable};
 use model_core::excitation::SplitMix64;
 use model_core::monitor::{Monitor, MonitorConfig, MonitorInputs};
 use model_core::narmax::mcu::build_period_ms;
-use model_core::narmax::mcu::{tanh_f32, tanh_q15, NarxF32, NarxQ15};
-use model_core::narmax::Narmax;
+use model_core::narmax::mcu::{tanh_f32, tanh_q15};
+use model_core::narmax::{Narmax, Predictor};
 use model_core::observer::{Measurements, Observer, ObserverConfig};
 use model_core::{Scheme, WhiteBox};
 use panic_semihosting as _;
@@ -128,30 +128,12 @@ fn flow() -> Result<Narmax<f32, { models::flow::INPUTS }, { models::flow::HIDDEN
     Narmax::from_nnsysid(&models::flow::MODEL).map_err(|_| "flow model refused")
 }
 
-/// model-core's MCU f32 pass (`NarxF32`, the firmware's static): free-run steps from the
-/// output's mean.
-fn narmax_f32<const F: usize, const H: usize>(
-    m: &NarxF32<F, H>,
-    c: &mut Cost,
-    n: u32,
-) -> Result<(), Error> {
+/// One of model-core's MCU passes (`NarxF32` or `NarxQ15`, the firmware's statics): free-run
+/// steps from the output's mean.
+fn narmax_pass<P: Predictor<Value = f32>>(m: &P, c: &mut Cost, n: u32) -> Result<(), Error> {
     let mut st = m.state_at(0.0, m.output_mean());
     for u in inputs::pulses(SEED, NARMAX_MS).take(n as usize) {
         c.time(|| m.simulate_step(black_box(&mut st), black_box(u)));
-    }
-    Ok(())
-}
-
-/// model-core's MCU Q15 pass (`NarxQ15`, the firmware's static): free-run steps from `y0`.
-fn narmax_fixed<const F: usize, const H: usize>(
-    q: &NarxQ15<F, H>,
-    y0: f32,
-    c: &mut Cost,
-    n: u32,
-) -> Result<(), Error> {
-    let mut st = q.state_at(0.0, y0);
-    for u in inputs::pulses(SEED, NARMAX_MS).take(n as usize) {
-        c.time(|| q.simulate_step(black_box(&mut st), black_box(u)));
     }
     Ok(())
 }
@@ -182,21 +164,19 @@ fn pressure_plain(c: &mut Cost, n: u32) -> Result<(), Error> {
     narmax_plain(plain_model!(pressure), &pressure()?, c, n)
 }
 fn pressure_f32(c: &mut Cost, n: u32) -> Result<(), Error> {
-    narmax_f32(&models::pressure::F32, c, n)
+    narmax_pass(&models::pressure::F32, c, n)
 }
 fn pressure_fixed(c: &mut Cost, n: u32) -> Result<(), Error> {
-    let y0 = models::pressure::F32.output_mean();
-    narmax_fixed(&models::pressure::Q15, y0, c, n)
+    narmax_pass(&models::pressure::Q15, c, n)
 }
 fn flow_plain(c: &mut Cost, n: u32) -> Result<(), Error> {
     narmax_plain(plain_model!(flow), &flow()?, c, n)
 }
 fn flow_f32(c: &mut Cost, n: u32) -> Result<(), Error> {
-    narmax_f32(&models::flow::F32, c, n)
+    narmax_pass(&models::flow::F32, c, n)
 }
 fn flow_fixed(c: &mut Cost, n: u32) -> Result<(), Error> {
-    let y0 = models::flow::F32.output_mean();
-    narmax_fixed(&models::flow::Q15, y0, c, n)
+    narmax_pass(&models::flow::Q15, c, n)
 }
 
 fn tanhf(c: &mut Cost, n: u32) -> Result<(), Error> {

@@ -216,6 +216,84 @@ pub struct NarmaxOutput<T> {
     pub clamped: bool,
 }
 
+/// A NARMAX predictor in physical units: the generic pass ([`Narmax`]) and the MCU passes
+/// ([`mcu::NarxF32`], [`mcu::NarxQ15`]) implement it, and every user (the controller, pumpbench,
+/// the MCU bench, the tests) runs a model through it.
+///
+/// An implementation gives the one body [`Predictor::step`] (predict ŷ(t) from the past, then
+/// store y(t)); the one-step-ahead and free-run steps are that body with and without a
+/// measurement, so a caller that does both holds one copy of the network.
+pub trait Predictor {
+    /// The number type of u (torque reference, %) and y (the output's unit).
+    type Value: Real;
+    /// A running model's history.
+    type State: Clone;
+
+    /// The lags.
+    fn lags(&self) -> Lags;
+
+    /// The output's training scaling (mean and standard deviation), physical units.
+    fn output_scaling(&self) -> Scaling<Self::Value>;
+
+    /// The output's training mean, physical units (where a history may start).
+    #[inline]
+    fn output_mean(&self) -> Self::Value {
+        self.output_scaling().mean
+    }
+
+    /// A history with every past sample at (u, y), physical units (no past errors).
+    fn state_at(&self, u: Self::Value, y: Self::Value) -> Self::State;
+
+    /// Puts the measured sample (u(t), y(t)) into the history without predicting: to seed the
+    /// first `lags().max_lag()` samples of a run from data.
+    fn seed(&self, st: &mut Self::State, u: Self::Value, y: Self::Value);
+
+    /// One step: takes u(t), returns ŷ(t) predicted from the past, then stores y(t): the
+    /// measurement if there is one (one-step-ahead; with nc > 0 also the error y − ŷ), ŷ(t)
+    /// if not (free run, errors zero).
+    fn step(
+        &self,
+        st: &mut Self::State,
+        u: Self::Value,
+        y_measured: Option<Self::Value>,
+    ) -> NarmaxOutput<Self::Value>;
+
+    /// Free-run step: takes u(t), returns ŷ(t) and feeds it back as the next y(t−1).
+    #[inline(always)]
+    fn simulate_step(&self, st: &mut Self::State, u: Self::Value) -> NarmaxOutput<Self::Value> {
+        self.step(st, u, None)
+    }
+
+    /// One-step-ahead step: takes u(t) and the measured y(t), returns ŷ(t) from the past only.
+    #[inline(always)]
+    fn predict_step(
+        &self,
+        st: &mut Self::State,
+        u: Self::Value,
+        y_measured: Self::Value,
+    ) -> NarmaxOutput<Self::Value> {
+        self.step(st, u, Some(y_measured))
+    }
+
+    /// The free-run output settled under a constant input `u`: runs the model from the output
+    /// mean until two successive outputs differ by less than `tol` (physical units) for
+    /// `max_lag` steps in a row, at most `max_steps` steps. `None` if it does not settle
+    /// (oscillating or diverging model). Fixed-point passes may settle more coarsely (see
+    /// theirs).
+    fn steady_output(
+        &self,
+        u: Self::Value,
+        tol: Self::Value,
+        max_steps: usize,
+    ) -> Option<Self::Value> {
+        let mut st = self.state_at(u, self.output_mean());
+        let need = self.lags().max_lag().max(1);
+        settle(self.output_mean(), tol, need, max_steps, || {
+            self.simulate_step(&mut st, u).y
+        })
+    }
+}
+
 /// Runs `next` until two successive outputs differ by less than `tol` for `need` steps in a
 /// row (from `start`), at most `max_steps` times: the settled output, `None` if it does not
 /// settle or leaves the finite numbers.
@@ -365,11 +443,6 @@ impl<T: Real, const N: usize, const H: usize> Narmax<T, N, H> {
         Ok(m)
     }
 
-    /// The lags.
-    pub fn lags(&self) -> Lags {
-        self.lags
-    }
-
     /// Hidden units.
     pub fn hidden(&self) -> usize {
         self.hidden
@@ -395,18 +468,6 @@ impl<T: Real, const N: usize, const H: usize> Narmax<T, N, H> {
         out
     }
 
-    /// A state with every past value at the scaled point of `u`, `y` (physical), no errors.
-    pub fn state_at(&self, u: T, y: T) -> NarmaxState<T, N> {
-        NarmaxState::filled(self.u_scale.scale(u), self.y_scale.scale(y), T::ZERO)
-    }
-
-    /// Puts one measured sample `(u(t), y(t))` into the history without predicting: to seed
-    /// the first `lags().max_lag()` samples of a run from data.
-    pub fn seed(&self, st: &mut NarmaxState<T, N>, u: T, y: T) {
-        st.push_u(self.lags, self.u_scale.scale(u));
-        st.push_y_e(self.lags, self.y_scale.scale(y), T::ZERO);
-    }
-
     /// Takes u(t), returns the network's scaled ŷ(t) and the clamp flag.
     fn predict_scaled(&self, st: &mut NarmaxState<T, N>, u: T) -> (T, bool) {
         st.push_u(self.lags, self.u_scale.scale(u));
@@ -414,46 +475,109 @@ impl<T: Real, const N: usize, const H: usize> Narmax<T, N, H> {
         let clamped = st.regressors(self.lags, &self.u_range, &self.y_range, &mut phi);
         (self.network(&phi), clamped)
     }
+}
 
-    /// Free-run simulation: takes u(t) (physical), returns ŷ(t) and feeds it back as the next
-    /// y(t−1); error regressors are zero.
-    pub fn simulate_step(&self, st: &mut NarmaxState<T, N>, u: T) -> NarmaxOutput<T> {
+impl<T: Real, const N: usize, const H: usize> Predictor for Narmax<T, N, H> {
+    type Value = T;
+    type State = NarmaxState<T, N>;
+
+    fn lags(&self) -> Lags {
+        self.lags
+    }
+
+    fn output_scaling(&self) -> Scaling<T> {
+        self.y_scale
+    }
+
+    /// Every past value at the scaled point of `u`, `y`, no errors.
+    fn state_at(&self, u: T, y: T) -> NarmaxState<T, N> {
+        NarmaxState::filled(self.u_scale.scale(u), self.y_scale.scale(y), T::ZERO)
+    }
+
+    fn seed(&self, st: &mut NarmaxState<T, N>, u: T, y: T) {
+        st.push_u(self.lags, self.u_scale.scale(u));
+        st.push_y_e(self.lags, self.y_scale.scale(y), T::ZERO);
+    }
+
+    /// Free run: ŷ(t) is fed back as the next y(t−1), error regressors zero; one-step-ahead:
+    /// stores y(t) and ε(t) = y(t) − ŷ(t).
+    fn step(&self, st: &mut NarmaxState<T, N>, u: T, y_measured: Option<T>) -> NarmaxOutput<T> {
         let (z, clamped) = self.predict_scaled(st, u);
-        st.push_y_e(self.lags, z, T::ZERO);
+        match y_measured {
+            Some(y) => {
+                let zy = self.y_scale.scale(y);
+                st.push_y_e(self.lags, zy, zy - z);
+            }
+            None => st.push_y_e(self.lags, z, T::ZERO),
+        }
         NarmaxOutput {
             y: self.y_scale.unscale(z),
             clamped,
         }
-    }
-
-    /// One-step-ahead prediction: takes u(t) and the measurement y(t) (physical), returns
-    /// ŷ(t) predicted from the past only, then stores y(t) and ε(t) = y(t) − ŷ(t).
-    pub fn predict_step(&self, st: &mut NarmaxState<T, N>, u: T, y_measured: T) -> NarmaxOutput<T> {
-        let (z, clamped) = self.predict_scaled(st, u);
-        let zy = self.y_scale.scale(y_measured);
-        st.push_y_e(self.lags, zy, zy - z);
-        NarmaxOutput {
-            y: self.y_scale.unscale(z),
-            clamped,
-        }
-    }
-
-    /// The free-run output settled under a constant input `u`: runs the model from the
-    /// output mean until two successive outputs differ by less than `tol` (physical units) for
-    /// `max_lag` steps in a row, at most `max_steps` steps. `None` if it does not settle
-    /// (oscillating or diverging model).
-    pub fn steady_output(&self, u: T, tol: T, max_steps: usize) -> Option<T> {
-        let mut st = self.state_at(u, self.y_scale.mean);
-        let need = self.lags.max_lag().max(1);
-        settle(self.y_scale.mean, tol, need, max_steps, || {
-            self.simulate_step(&mut st, u).y
-        })
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn from_nnsysid_is_new_with_every_value_rounded_once() {
+        let lags = Lags {
+            na: 2,
+            nb: 2,
+            nc: 0,
+            nk: 1,
+        };
+        let w1: Vec<f64> = (0..3 * 5).map(|i| 0.8 * (0.37 * i as f64).sin()).collect();
+        let w2 = [0.3, -0.2, 0.5, 0.1];
+        let m = mcu::NnsysidModel {
+            lags,
+            hidden: 3,
+            w1: &w1,
+            w2: &w2,
+            u_scale: Scaling {
+                mean: 45.1,
+                std: 23.3,
+            },
+            y_scale: Scaling {
+                mean: 2.1,
+                std: 0.51,
+            },
+            u_range: [5.2, 85.3],
+            y_range: [0.55, 3.45],
+        };
+        let f = |x: &[f64]| x.iter().map(|&v| v as f32).collect::<Vec<f32>>();
+        let s = |s: Scaling<f64>| Scaling {
+            mean: s.mean as f32,
+            std: s.std as f32,
+        };
+        let r = |r: [f64; 2]| [r[0] as f32, r[1] as f32];
+        let by_new = Narmax::<f32, 8, 4>::new(
+            lags,
+            3,
+            &f(&w1),
+            &f(&w2),
+            s(m.u_scale),
+            s(m.y_scale),
+            r(m.u_range),
+            r(m.y_range),
+        );
+        assert_eq!(Narmax::<f32, 8, 4>::from_nnsysid(&m), by_new);
+        assert!(by_new.is_ok());
+        // The same checks as `new`.
+        let short = mcu::NnsysidModel { w2: &w2[..3], ..m };
+        assert_eq!(
+            Narmax::<f32, 8, 4>::from_nnsysid(&short),
+            Err(NarmaxError::WrongShape)
+        );
+        let nan = [f64::NAN, 0.0, 0.0, 0.0];
+        let bad = mcu::NnsysidModel { w2: &nan, ..m };
+        assert_eq!(
+            Narmax::<f32, 8, 4>::from_nnsysid(&bad),
+            Err(NarmaxError::BadValue)
+        );
+    }
 
     const UNIT: Scaling<f64> = Scaling {
         mean: 0.0,

@@ -2,13 +2,14 @@
 
 use crate::input::{read_series, Series};
 use crate::modelfile::{
-    in_firmware_range, HostNarmax, HostNarxQ15, LagsFile, ModelFile, ScalingFile, Target, Training,
-    FORMAT, MAX_ABS_VALUE,
+    in_firmware_range, HostNarxQ15, LagsFile, ModelFile, ScalingFile, Target, Training, FORMAT,
+    MAX_ABS_VALUE,
 };
 use crate::num::Short;
 use crate::train::{identify, Data, Structure};
 use crate::Failure;
 use indicatif::{ProgressBar, ProgressStyle};
+use model_core::narmax::Predictor;
 use model_core::Real;
 use std::io::Write;
 use std::path::Path;
@@ -219,95 +220,46 @@ pub fn read_for_model(m: &ModelFile, path: &Path, need_y: bool) -> Result<Series
     Ok(s)
 }
 
-/// A NARMAX model in one of the arithmetics the host runs (f64, f32, fixed point), seen
-/// through physical f64 values at the edges.
-pub trait HostModel {
-    /// Its history.
-    type State;
-    /// Samples of history it needs.
-    fn max_lag(&self) -> usize;
-    /// History at (u, y).
-    fn start(&self, u: f64, y: f64) -> Self::State;
-    /// Pushes a measured sample.
-    fn seed(&self, st: &mut Self::State, u: f64, y: f64);
-    /// One free-run step: the output and whether a regressor was clamped to the training range.
-    fn step(&self, st: &mut Self::State, u: f64) -> (f64, bool);
-    /// Settled free-run output under constant u.
-    fn steady(&self, u: f64) -> Option<f64>;
-}
-
-impl<T: Real> HostModel for HostNarmax<T> {
-    type State = model_core::narmax::NarmaxState<T, { crate::modelfile::HOST_MAX_INPUTS }>;
-    fn max_lag(&self) -> usize {
-        self.lags().max_lag()
-    }
-    fn start(&self, u: f64, y: f64) -> Self::State {
-        self.state_at(T::from_f64(u), T::from_f64(y))
-    }
-    fn seed(&self, st: &mut Self::State, u: f64, y: f64) {
-        HostNarmax::seed(self, st, T::from_f64(u), T::from_f64(y));
-    }
-    fn step(&self, st: &mut Self::State, u: f64) -> (f64, bool) {
-        let o = self.simulate_step(st, T::from_f64(u));
-        (o.y.to_f64(), o.clamped)
-    }
-    fn steady(&self, u: f64) -> Option<f64> {
-        // 1e-7 of the output's spread, or 64 ulps of the output's scale in T.
-        let ys = self.scaling().1;
-        let ulps = (ys.mean.abs() + T::from_f64(4.0) * ys.std) * T::EPSILON * T::from_f64(64.0);
-        let tol = (ys.std * T::from_f64(1e-7)).max(ulps);
-        self.steady_output(T::from_f64(u), tol, 200_000)
-            .map(T::to_f64)
-    }
-}
-
-impl HostModel for HostNarxQ15 {
-    type State = model_core::narmax::mcu::NarxQ15State<{ crate::modelfile::HOST_MAX_FRAMES }>;
-    fn max_lag(&self) -> usize {
-        self.lags().max_lag()
-    }
-    fn start(&self, u: f64, y: f64) -> Self::State {
-        self.state_at(u as f32, y as f32)
-    }
-    fn seed(&self, st: &mut Self::State, u: f64, y: f64) {
-        HostNarxQ15::seed(self, st, u as f32, y as f32);
-    }
-    fn step(&self, st: &mut Self::State, u: f64) -> (f64, bool) {
-        let o = self.simulate_step(st, u as f32);
-        (f64::from(o.y), o.clamped)
-    }
-    fn steady(&self, u: f64) -> Option<f64> {
-        self.steady_output(u as f32, 200_000).map(f64::from)
-    }
+/// The settled output of `m` under a constant torque `u` (%), physical f64: successive outputs
+/// within 1e-7 of the output's spread, or 64 ulps of its scale in the model's arithmetic
+/// (the Q15 pass settles no finer than 4 LSBs of its code); `None` if it does not settle in
+/// 200 000 steps.
+fn settled<P: Predictor>(m: &P, u: f64) -> Option<f64> {
+    let ys = m.output_scaling();
+    let v = P::Value::from_f64;
+    let ulps = (ys.mean.abs() + v(4.0) * ys.std) * P::Value::EPSILON * v(64.0);
+    let tol = (ys.std * v(1e-7)).max(ulps);
+    m.steady_output(v(u), tol, 200_000).map(Real::to_f64)
 }
 
 /// Free-run simulation of `series`: one output per row. If the series has the target column,
 /// its first max-lag rows seed the history and are returned as measured; otherwise the history
 /// starts at the model's own steady state for the first torque.
-pub fn free_run<M: HostModel>(m: &M, series: &Series) -> Result<Vec<f64>, Failure> {
+pub fn free_run<M: Predictor>(m: &M, series: &Series) -> Result<Vec<f64>, Failure> {
     let u = &series.torque_ref_pct;
+    let v = M::Value::from_f64;
     let mut out = Vec::with_capacity(u.len());
     let mut st;
     let mut start = 0;
     match &series.y {
         Some(y) => {
-            st = m.start(u[0], y[0]);
-            start = m.max_lag().min(u.len());
+            st = m.state_at(v(u[0]), v(y[0]));
+            start = m.lags().max_lag().min(u.len());
             for k in 0..start {
-                m.seed(&mut st, u[k], y[k]);
+                m.seed(&mut st, v(u[k]), v(y[k]));
                 out.push(y[k]);
             }
         }
         None => {
             let y0 = steady_of(m, u[0])?;
-            st = m.start(u[0], y0);
+            st = m.state_at(v(u[0]), v(y0));
         }
     }
     let mut clamped = 0usize;
     for &uk in &u[start..] {
-        let (y, c) = m.step(&mut st, uk);
-        out.push(y);
-        clamped += usize::from(c);
+        let o = m.simulate_step(&mut st, v(uk));
+        out.push(o.y.to_f64());
+        clamped += usize::from(o.clamped);
     }
     if clamped > 0 {
         eprintln!(
@@ -320,8 +272,8 @@ pub fn free_run<M: HostModel>(m: &M, series: &Series) -> Result<Vec<f64>, Failur
 
 /// The model's steady output under a constant torque `u` (%); a model that does not settle is
 /// an error (code 1).
-pub fn steady_of<M: HostModel>(m: &M, u: f64) -> Result<f64, Failure> {
-    m.steady(u).ok_or_else(|| Failure {
+pub fn steady_of<M: Predictor>(m: &M, u: f64) -> Result<f64, Failure> {
+    settled(m, u).ok_or_else(|| Failure {
         code: 1,
         message: format!(
             "the model does not settle under a constant torque of {} %",
@@ -336,7 +288,7 @@ pub fn quantized(m: &ModelFile) -> Result<HostNarxQ15, Failure> {
 }
 
 /// `simulate --model narmax`.
-pub fn simulate<M: HostModel>(
+pub fn simulate<M: Predictor>(
     model: &M,
     m: &ModelFile,
     series: &Series,
@@ -351,7 +303,7 @@ pub fn simulate<M: HostModel>(
 }
 
 /// `steady --model narmax`.
-pub fn steady<M: HostModel>(
+pub fn steady<M: Predictor>(
     model: &M,
     m: &ModelFile,
     torques: &[f64],
@@ -410,7 +362,7 @@ pub struct Validation {
 /// `validate`.
 ///
 /// `statics` holds `(torque_ref_pct, measured steady output)` pairs.
-pub fn validate<M: HostModel>(
+pub fn validate<M: Predictor>(
     model: &M,
     m: &ModelFile,
     series: &Series,

@@ -47,7 +47,7 @@
 //!
 //! [`NarxQ15::one_step_error_bound`] bounds the one-step difference to the f64 network.
 
-use super::{Lags, NarmaxError, NarmaxOutput, Scaling, MAX_NK};
+use super::{Lags, NarmaxError, NarmaxOutput, Predictor, Scaling, MAX_NK};
 use crate::dsp::{pack, smlad};
 
 include!(concat!(env!("OUT_DIR"), "/tanh_table.rs"));
@@ -492,30 +492,6 @@ impl<const F: usize, const H: usize> NarxF32<F, H> {
         }
     }
 
-    /// The lags.
-    pub fn lags(&self) -> Lags {
-        self.lags
-    }
-
-    /// The output's training mean, physical units (where a history may start).
-    pub fn output_mean(&self) -> f32 {
-        self.y_mean
-    }
-
-    /// A history with every past sample at (u, y), physical units.
-    pub fn state_at(&self, u: f32, y: f32) -> NarxF32State<F> {
-        let (zu, cu) = enter_f32(u, self.u_gain, self.u_offset, self.u_range);
-        let (zy, cy) = enter_f32(y, self.y_gain, self.y_offset, self.y_range);
-        NarxF32State(Ring::filled([zy, zu], cy, cu))
-    }
-
-    /// Puts the measured sample (u(t), y(t)) into the history without predicting.
-    pub fn seed(&self, st: &mut NarxF32State<F>, u: f32, y: f32) {
-        let (zu, cu) = enter_f32(u, self.u_gain, self.u_offset, self.u_range);
-        let (zy, cy) = enter_f32(y, self.y_gain, self.y_offset, self.y_range);
-        st.0.push([zy, zu], cy, cu);
-    }
-
     /// The network's scaled output for the current window.
     #[inline(always)]
     fn network(&self, st: &NarxF32State<F>) -> f32 {
@@ -537,17 +513,39 @@ impl<const F: usize, const H: usize> NarxF32<F, H> {
     fn clamped(&self, st: &NarxF32State<F>) -> bool {
         (st.0.y_clamped & self.used_y) | (st.0.u_clamped & self.used_u) != 0
     }
+}
 
-    /// One step: takes u(t) (%), returns ŷ(t) (physical) predicted from the past, then
-    /// stores y(t): the measurement if there is one (one-step-ahead), ŷ(t) if not (free run).
-    /// One body for both, so a caller that does both holds one copy of the network.
+impl<const F: usize, const H: usize> Predictor for NarxF32<F, H> {
+    type Value = f32;
+    type State = NarxF32State<F>;
+
+    fn lags(&self) -> Lags {
+        self.lags
+    }
+
+    fn output_scaling(&self) -> Scaling<f32> {
+        Scaling {
+            mean: self.y_mean,
+            std: self.y_std,
+        }
+    }
+
+    fn state_at(&self, u: f32, y: f32) -> NarxF32State<F> {
+        let (zu, cu) = enter_f32(u, self.u_gain, self.u_offset, self.u_range);
+        let (zy, cy) = enter_f32(y, self.y_gain, self.y_offset, self.y_range);
+        NarxF32State(Ring::filled([zy, zu], cy, cu))
+    }
+
+    fn seed(&self, st: &mut NarxF32State<F>, u: f32, y: f32) {
+        let (zu, cu) = enter_f32(u, self.u_gain, self.u_offset, self.u_range);
+        let (zy, cy) = enter_f32(y, self.y_gain, self.y_offset, self.y_range);
+        st.0.push([zy, zu], cy, cu);
+    }
+
+    /// The measurement enters the history scaled and clamped; in free run ŷ(t) clamped to
+    /// the training range.
     #[inline(always)]
-    pub fn step(
-        &self,
-        st: &mut NarxF32State<F>,
-        u: f32,
-        y_measured: Option<f32>,
-    ) -> NarmaxOutput<f32> {
+    fn step(&self, st: &mut NarxF32State<F>, u: f32, y_measured: Option<f32>) -> NarmaxOutput<f32> {
         let z = self.network(st);
         let clamped = self.clamped(st);
         let (zu, cu) = enter_f32(u, self.u_gain, self.u_offset, self.u_range);
@@ -560,32 +558,6 @@ impl<const F: usize, const H: usize> NarxF32<F, H> {
             y: z * self.y_std + self.y_mean,
             clamped,
         }
-    }
-
-    /// Free-run step: takes u(t) (%), returns ŷ(t) (physical) and feeds it back.
-    #[inline]
-    pub fn simulate_step(&self, st: &mut NarxF32State<F>, u: f32) -> NarmaxOutput<f32> {
-        self.step(st, u, None)
-    }
-
-    /// One-step-ahead step: takes u(t) and the measured y(t), returns ŷ(t) from the past.
-    #[inline]
-    pub fn predict_step(
-        &self,
-        st: &mut NarxF32State<F>,
-        u: f32,
-        y_measured: f32,
-    ) -> NarmaxOutput<f32> {
-        self.step(st, u, Some(y_measured))
-    }
-
-    /// Free-run output settled under constant `u` (see [`super::Narmax::steady_output`]).
-    pub fn steady_output(&self, u: f32, tol: f32, max_steps: usize) -> Option<f32> {
-        let mut st = self.state_at(u, self.y_mean);
-        let need = self.lags.max_lag().max(1);
-        super::settle(self.y_mean, tol, need, max_steps, || {
-            self.simulate_step(&mut st, u).y
-        })
     }
 }
 
@@ -631,6 +603,9 @@ pub struct NarxQ15<const F: usize, const H: usize> {
     y_offset: f32,
     /// Settled output: 1 LSB of y's code, physical units.
     y_lsb: f32,
+    /// The output's training mean and standard deviation, physical units.
+    y_mean: f32,
+    y_std: f32,
     used_y: u32,
     used_u: u32,
 }
@@ -836,6 +811,8 @@ impl<const F: usize, const H: usize> NarxQ15<F, H> {
             y_gain: (32768.0 / (ys.std * h[0])) as f32,
             y_offset: (-32768.0 * (ys.mean / ys.std + c[0]) / h[0]) as f32,
             y_lsb: (ys.std * h[0] / 32768.0) as f32,
+            y_mean: ys.mean as f32,
+            y_std: ys.std as f32,
             used_y: m.used(0),
             used_u: m.used(1),
         };
@@ -858,25 +835,6 @@ impl<const F: usize, const H: usize> NarxQ15<F, H> {
             Ok(x) => x,
             Err(e) => build_error(e),
         }
-    }
-
-    /// The lags.
-    pub fn lags(&self) -> Lags {
-        self.lags
-    }
-
-    /// A history with every past sample at (u, y), physical units.
-    pub fn state_at(&self, u: f32, y: f32) -> NarxQ15State<F> {
-        let (qu, cu) = enter_q15(u, self.u_gain, self.u_offset);
-        let (qy, cy) = enter_q15(y, self.y_gain, self.y_offset);
-        NarxQ15State(Ring::filled(pack(qy, qu), cy, cu))
-    }
-
-    /// Puts the measured sample (u(t), y(t)) into the history without predicting.
-    pub fn seed(&self, st: &mut NarxQ15State<F>, u: f32, y: f32) {
-        let (qu, cu) = enter_q15(u, self.u_gain, self.u_offset);
-        let (qy, cy) = enter_q15(y, self.y_gain, self.y_offset);
-        st.0.push(pack(qy, qu), cy, cu);
     }
 
     /// The output accumulator for the current window (y's Q15 code · 2^(shift2)).
@@ -910,73 +868,6 @@ impl<const F: usize, const H: usize> NarxQ15<F, H> {
         }
     }
 
-    /// One step: takes u(t) (%), returns ŷ(t) (physical) predicted from the past, then
-    /// stores y(t): the measurement's code if there is one (one-step-ahead), ŷ(t)'s if not
-    /// (free run). One body for both, so a caller that does both holds one copy.
-    #[inline(always)]
-    pub fn step(
-        &self,
-        st: &mut NarxQ15State<F>,
-        u: f32,
-        y_measured: Option<f32>,
-    ) -> NarmaxOutput<f32> {
-        let acc = self.network(st);
-        let clamped = self.clamped(st);
-        let (qu, cu) = enter_q15(u, self.u_gain, self.u_offset);
-        let (qy, cy) = match y_measured {
-            Some(y) => enter_q15(y, self.y_gain, self.y_offset),
-            None => {
-                // Saturated to i16 (one `SSAT`); clamped if that changed it.
-                let code = round_shift(acc, self.shift2);
-                let sat = code.clamp(-32768, 32767);
-                (sat as i16, sat != code)
-            }
-        };
-        st.0.push(pack(qy, qu), cy, cu);
-        self.output(acc, clamped)
-    }
-
-    /// Free-run step: takes u(t) (%), returns ŷ(t) (physical) and feeds its code back.
-    #[inline]
-    pub fn simulate_step(&self, st: &mut NarxQ15State<F>, u: f32) -> NarmaxOutput<f32> {
-        self.step(st, u, None)
-    }
-
-    /// One-step-ahead step: takes u(t) and the measured y(t), returns ŷ(t) from the past.
-    #[inline]
-    pub fn predict_step(
-        &self,
-        st: &mut NarxQ15State<F>,
-        u: f32,
-        y_measured: f32,
-    ) -> NarmaxOutput<f32> {
-        self.step(st, u, Some(y_measured))
-    }
-
-    /// Free-run output settled under constant `u`: successive outputs within 4 LSBs of y's
-    /// code for 4·max-lag steps in a row (fixed-point feedback may end in a limit cycle of a
-    /// few LSBs); the mean over those steps. `None` if it does not settle in `max_steps`.
-    pub fn steady_output(&self, u: f32, max_steps: usize) -> Option<f32> {
-        let mut st = self.state_at(u, self.out_offset);
-        let need = 4 * self.lags.max_lag().max(1);
-        let (mut calm, mut last, mut sum) = (0usize, f32::NAN, 0.0f64);
-        for _ in 0..max_steps {
-            let y = self.simulate_step(&mut st, u).y;
-            if (y - last).abs() <= 4.0 * self.y_lsb {
-                calm += 1;
-                sum += f64::from(y);
-            } else {
-                calm = 0;
-                sum = 0.0;
-            }
-            if calm >= need {
-                return Some((sum / need as f64) as f32);
-            }
-            last = y;
-        }
-        None
-    }
-
     /// Bound on |ŷ_Q15 − ŷ| in scaled output units (multiply by y's std for physical units)
     /// for one step from the same history, ŷ the exact network on the unquantised history,
     /// every history value within its training range. Terms: each regressor's rounding to its
@@ -1002,6 +893,79 @@ impl<const F: usize, const H: usize> NarxQ15<F, H> {
         // bias in code units), to scaled units; the f32 conversion of the accumulator
         // (≤ 2^31 · 2^-24 accumulator units) and of the physical output.
         Ok(total + b.qerr2 * h + h * libm::exp2(e2 - 30.0) * 128.0 + b.z_max * libm::exp2(-22.0))
+    }
+}
+
+impl<const F: usize, const H: usize> Predictor for NarxQ15<F, H> {
+    type Value = f32;
+    type State = NarxQ15State<F>;
+
+    fn lags(&self) -> Lags {
+        self.lags
+    }
+
+    fn output_scaling(&self) -> Scaling<f32> {
+        Scaling {
+            mean: self.y_mean,
+            std: self.y_std,
+        }
+    }
+
+    fn state_at(&self, u: f32, y: f32) -> NarxQ15State<F> {
+        let (qu, cu) = enter_q15(u, self.u_gain, self.u_offset);
+        let (qy, cy) = enter_q15(y, self.y_gain, self.y_offset);
+        NarxQ15State(Ring::filled(pack(qy, qu), cy, cu))
+    }
+
+    fn seed(&self, st: &mut NarxQ15State<F>, u: f32, y: f32) {
+        let (qu, cu) = enter_q15(u, self.u_gain, self.u_offset);
+        let (qy, cy) = enter_q15(y, self.y_gain, self.y_offset);
+        st.0.push(pack(qy, qu), cy, cu);
+    }
+
+    /// The measurement's code enters the history; in free run ŷ(t)'s code, saturated.
+    #[inline(always)]
+    fn step(&self, st: &mut NarxQ15State<F>, u: f32, y_measured: Option<f32>) -> NarmaxOutput<f32> {
+        let acc = self.network(st);
+        let clamped = self.clamped(st);
+        let (qu, cu) = enter_q15(u, self.u_gain, self.u_offset);
+        let (qy, cy) = match y_measured {
+            Some(y) => enter_q15(y, self.y_gain, self.y_offset),
+            None => {
+                // Saturated to i16 (one `SSAT`); clamped if that changed it.
+                let code = round_shift(acc, self.shift2);
+                let sat = code.clamp(-32768, 32767);
+                (sat as i16, sat != code)
+            }
+        };
+        st.0.push(pack(qy, qu), cy, cu);
+        self.output(acc, clamped)
+    }
+
+    /// Free-run output settled under constant `u`: successive outputs within `tol` and at
+    /// least 4 LSBs of y's code (fixed-point feedback may end in a limit cycle of a few LSBs)
+    /// for 4·max-lag steps in a row; the mean over those steps. Starts from the centre of y's
+    /// code range. `None` if it does not settle in `max_steps`.
+    fn steady_output(&self, u: f32, tol: f32, max_steps: usize) -> Option<f32> {
+        let mut st = self.state_at(u, self.out_offset);
+        let need = 4 * self.lags.max_lag().max(1);
+        let tol = tol.max(4.0 * self.y_lsb);
+        let (mut calm, mut last, mut sum) = (0usize, f32::NAN, 0.0f64);
+        for _ in 0..max_steps {
+            let y = self.simulate_step(&mut st, u).y;
+            if (y - last).abs() <= tol {
+                calm += 1;
+                sum += f64::from(y);
+            } else {
+                calm = 0;
+                sum = 0.0;
+            }
+            if calm >= need {
+                return Some((sum / need as f64) as f32);
+            }
+            last = y;
+        }
+        None
     }
 }
 
