@@ -15,11 +15,11 @@ fn main() {
         1u32 << STEP_LOG2,
         n - 1
     );
-    text += &format!("pub(crate) static TANH_Q15: [i16; {n}] = [\n");
+    text += &format!("pub(crate) static TANH_Q15: [I1F15; {n}] = [\n");
     for k in 0..n as i64 {
         let x = (k - half) as f64 / f64::from(1u32 << STEP_LOG2);
         let q = (x.tanh() * 32768.0).round().clamp(-32767.0, 32767.0) as i16;
-        text += &format!("    {q},\n");
+        text += &format!("    I1F15::from_bits({q}),\n");
     }
     text += "];\n";
     text += &format!("/// log2 of the table's steps per unit.\npub(crate) const TANH_STEP_LOG2: u32 = {STEP_LOG2};\n");

@@ -408,7 +408,7 @@ pub mod port {
 pub mod selftest {
     use controller::modbus::{crc16, request_at_end, Frame};
     use controller::rtu::{gap_us, RtuFramer};
-    use model_core::narmax::mcu::{tanh_f32, tanh_q15, TANH_Q15_MAX_ERROR};
+    use model_core::narmax::mcu::{tanh_f32, tanh_q15, I16F16, TANH_Q15_MAX_ERROR};
 
     /// A 32-bit digest of a stream of words (order-sensitive; for comparing results, not for
     /// security).
@@ -458,7 +458,7 @@ pub mod selftest {
             d[3].add(tanh_f32(x).to_bits());
         }
         for x in -(8 << 16)..(8 << 16) {
-            d[4].add(tanh_q15(x) as u16 as u32);
+            d[4].add(tanh_q15(I16F16::from_bits(x)).to_bits() as u16 as u32);
         }
         [
             ("libm_tanhf", d[0].0),
@@ -476,7 +476,7 @@ pub mod selftest {
         for k in 0..65_536i32 {
             let x_q16 = (k - 32_768) * 16;
             let exact = libm::tanhf(x_q16 as f32 / 65_536.0);
-            let got = f32::from(tanh_q15(x_q16)) / 32_768.0;
+            let got = f32::from(tanh_q15(I16F16::from_bits(x_q16)).to_bits()) / 32_768.0;
             worst = worst.max(libm::fabsf(got - exact));
         }
         if worst as f64 <= TANH_Q15_MAX_ERROR + 1e-7 {

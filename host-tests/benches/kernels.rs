@@ -3,7 +3,7 @@
 //! come from `cargo xtask bench`; these are host nanoseconds, for the host tools.
 use criterion::measurement::WallTime;
 use criterion::{criterion_group, criterion_main, BatchSize, BenchmarkGroup, Criterion};
-use model_core::narmax::mcu::{tanh_f32, tanh_q15};
+use model_core::narmax::mcu::{tanh_f32, tanh_q15, I16F16};
 use model_core::narmax::{Narmax, Predictor};
 use model_core::observer::{Measurements, Observer, ObserverConfig};
 use model_core::{Real, Scheme, WhiteBox};
@@ -65,7 +65,7 @@ fn tanh(c: &mut Criterion) {
     g.bench_function("libm_tanhf", |b| b.iter(|| black_box(libm::tanhf(next()))));
     g.bench_function("rational_f32", |b| b.iter(|| black_box(tanh_f32(next()))));
     g.bench_function("table_q15", |b| {
-        b.iter(|| black_box(tanh_q15((next() * 65536.0) as i32)))
+        b.iter(|| black_box(tanh_q15(I16F16::from_bits((next() * 65536.0) as i32))))
     });
     g.finish();
 }

@@ -30,7 +30,7 @@ use model_core::dsp::{smlad, smlad_portable};
 use model_core::excitation::SplitMix64;
 use model_core::monitor::{Monitor, MonitorConfig, MonitorInputs};
 use model_core::narmax::mcu::build_period_ms;
-use model_core::narmax::mcu::{tanh_f32, tanh_q15};
+use model_core::narmax::mcu::{tanh_f32, tanh_q15, I16F16};
 use model_core::narmax::{Narmax, Predictor};
 use model_core::observer::{Measurements, Observer, ObserverConfig};
 use model_core::{Scheme, WhiteBox};
@@ -195,7 +195,7 @@ fn tanh_f32_row(c: &mut Cost, n: u32) -> Result<(), Error> {
 
 fn tanh_q15_row(c: &mut Cost, n: u32) -> Result<(), Error> {
     for x in inputs::uniform(SEED, -4.0, 4.0).take(n as usize) {
-        let x = (x * 65536.0) as i32;
+        let x = I16F16::from_bits((x * 65536.0) as i32);
         c.time(|| tanh_q15(black_box(x)));
     }
     Ok(())

@@ -23,6 +23,9 @@
 //! FPSCR's exception flags it may set are never read). Compiled only for hard-float M4F/M7
 //! targets (the `model_core_vsqrt` cfg from `build.rs`); elsewhere [`sqrt_f32`] is
 //! `libm::sqrtf`.
+//!
+//! `micromath` stays out: its `sqrt` is a fast approximation about 5 % off, where the
+//! observer's covariance needs a correctly rounded one; its other functions are not needed.
 #![allow(unsafe_code)]
 
 /// √x in f32, correctly rounded: `VSQRT.F32` on a hard-float Cortex-M, else `libm::sqrtf`.
