@@ -215,7 +215,8 @@ fn residuals_are_measured_minus_predicted() {
 
 #[test]
 fn loop_state_size() {
-    // The loop's state lives on the MCU's stack (or in a static): printed for the README.
+    // The loop's state lives on the MCU's stack (or in a static): printed for
+    // docs/measurements.md ("Images").
     let n = std::mem::size_of::<Board>();
     println!("size_of VirtualBoard (core, links, virtual bench): {n} B");
     assert!(n < 12 * 1024, "{n} B");

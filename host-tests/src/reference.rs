@@ -4,7 +4,7 @@
 //! evaluated term by term as printed, flow from the closed-form cubic roots polished by
 //! bisection, steady state by scan and bisection on its own code, and an adaptive
 //! Dormand-Prince 5(4) integrator. Units of the coefficients: rpm, l/s, mca, % of nominal
-//! torque (the README's "Units (the paper prints none)").
+//! torque (docs/bench.md, "Units (the paper prints none)").
 
 use std::f64::consts::PI;
 

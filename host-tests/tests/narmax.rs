@@ -209,7 +209,7 @@ fn fixed_point_one_step_error_within_its_stated_bound() {
         // The bound is asserted useful (< 0.01 mca) for weights up to ±2 (the shipped models'
         // largest is 3.06, most are under 1). With weights of ±5 the Q15 pass's error is
         // 1.6e-3 mca and its bound 1.5e-2 (the I16F16 pass it replaced: 3.7e-4 and 7.3e-3):
-        // reported in the README, not asserted.
+        // reported in docs/narmax.md, not asserted.
         if w <= 2.0 {
             assert!(bound < 0.01, "bound too loose to be useful: {bound}");
         }

@@ -162,7 +162,7 @@ fn time_constant(bench: &WhiteBox<f64>, from: f64, to: f64) -> f64 {
 
 #[test]
 fn the_units_table_is_reproduced() {
-    // The README's "What this model gives against the paper's own operating points": what
+    // docs/bench.md, "What this model gives against the paper's own operating points": what
     // the unit system of "Units (the paper prints none)" gives, as printed there (rounded).
     let bench = WhiteBox::<f64>::paper();
     let at = |u: f64| bench.signals(&bench.steady_state(u).unwrap());
@@ -208,7 +208,7 @@ fn the_units_table_is_reproduced() {
 
 #[test]
 fn paper_operating_points_differ_as_documented() {
-    // The README states these differences to the paper's own operating points.
+    // docs/bench.md states these differences to the paper's own operating points.
     let bench = WhiteBox::<f64>::paper();
     let w5 = bench.steady_state(5.0).unwrap().speed_rpm;
     let w85 = bench.steady_state(85.0).unwrap().speed_rpm;

@@ -1,5 +1,6 @@
 //! One hour of bench at a 1 ms step (3.6 M steps) per scheme and precision, on the host.
-//! `cargo bench -p model-core --bench hour` prints a Markdown table (quoted in the README).
+//! `cargo bench -p model-core --bench hour` prints a Markdown table (quoted in
+//! docs/measurements.md, "Host speed").
 use model_core::excitation::PulseTrain;
 use model_core::{Real, Scheme, WhiteBox};
 use std::hint::black_box;

@@ -306,7 +306,7 @@ pub struct Options {
     pub save_baseline: bool,
 }
 
-/// Thousands separated by spaces, as the README writes them.
+/// Thousands separated by spaces, as the docs (docs/measurements.md) write them.
 fn group(n: i64) -> String {
     let digits = n.unsigned_abs().to_string();
     let mut s = String::new();
