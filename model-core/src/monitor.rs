@@ -21,9 +21,10 @@
 //! An alarm raised again after it cleared needs a new acknowledge.
 
 use crate::equations::{electromagnetic_torque_pct, load_torque_pct};
-use crate::observer::{clamp_torque, Estimate, Use};
+use crate::observer::{Estimate, Use};
 use crate::params::{BenchParams, FITTED_FLOW_MAX_LPS};
 use crate::scalar::Real;
+use crate::units::applied_torque_pct;
 
 /// Bit of the pressure transmitter fault.
 pub const PRESSURE_TRANSMITTER: u16 = 1 << 0;
@@ -360,7 +361,7 @@ impl<T: Real> Monitor<T> {
         let flow = self.last_flow.map_or(e.flow_lps, |(q, _)| q);
         let delivered = match m.vfd_torque_pct {
             Some(t) if t.is_finite() => t,
-            _ => electromagnetic_torque_pct(&self.gamma, clamp_torque(m.torque_ref_pct)),
+            _ => electromagnetic_torque_pct(&self.gamma, applied_torque_pct(m.torque_ref_pct)),
         };
         let shown = delivered - rate / accel;
         let needed = load_torque_pct(&self.beta, speed, flow);

@@ -55,6 +55,7 @@ use crate::equations::{electromagnetic_torque_pct, CubicInFlow};
 use crate::flow::solve_flow;
 use crate::params::BenchParams;
 use crate::scalar::Real;
+use crate::units::applied_torque_pct;
 use crate::BenchError;
 
 /// Number of states.
@@ -450,7 +451,7 @@ impl<T: Real> Observer<T> {
     /// Restarts at the model's steady state for `torque_ref_pct`, nominal valve and curves,
     /// the initial covariance.
     pub fn reset(&mut self, torque_ref_pct: T) {
-        let u = clamp_torque(torque_ref_pct);
+        let u = applied_torque_pct(torque_ref_pct);
         let par = &self.cfg.params;
         let mut x = [T::ZERO; STATES];
         x[K2] = par.valve_k2;
@@ -575,8 +576,8 @@ impl<T: Real> Observer<T> {
         x[K2] * x[K2] * q * q - self.cfg.params.static_head_c_mca
     }
 
-    /// Advances by `dt_s` seconds with the torque reference `torque_ref_pct` held (NaN → 0,
-    /// clamped to 0..=100 %), then takes the measurements that arrived. Returns the estimate.
+    /// Advances by `dt_s` seconds with the torque reference `torque_ref_pct` held (applied by
+    /// [`crate::units::applied_torque_pct`]: clamped to 0..=100 %, NaN → 0), then takes the measurements that arrived. Returns the estimate.
     pub fn step(
         &mut self,
         dt_s: T,
@@ -595,7 +596,7 @@ impl<T: Real> Observer<T> {
             self.flow_rate,
         );
         self.decide_holds(dt_s, m);
-        self.predict(dt_s, clamp_torque(torque_ref_pct));
+        self.predict(dt_s, applied_torque_pct(torque_ref_pct));
         let pressure = self.update_pressure(m.pressure_mca);
         let flow = self.update_flow(m.flow_lps);
         let speed = self.update_speed(m.speed_rpm);
@@ -1174,15 +1175,6 @@ fn unreachable_estimate<T: Real>(x: &Vector<T>) -> Estimate<T> {
         pressure: none,
         flow: none,
         speed: none,
-    }
-}
-
-/// A torque reference as the models take it: NaN and ±∞ as 0, clamped to 0..=100 %.
-pub(crate) fn clamp_torque<T: Real>(u: T) -> T {
-    if u.is_finite() {
-        u.max(T::ZERO).min(T::from_f64(100.0))
-    } else {
-        T::ZERO
     }
 }
 

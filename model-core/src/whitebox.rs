@@ -10,6 +10,7 @@ use crate::params::{
     BenchParams, FITTED_FLOW_MAX_LPS, FITTED_SPEED_MAX_RPM, FITTED_SPEED_MIN_RPM, RPM_PER_RAD_S,
 };
 use crate::scalar::Real;
+use crate::units::checked_torque_pct;
 
 /// Largest integration step accepted, s. RK4 is stable up to ≈ 0.6 s at the bench's fastest
 /// time constant (≈ 0.22 s) and Euler up to ≈ 0.44 s; 0.1 s keeps every scheme well inside.
@@ -263,15 +264,11 @@ impl<T: Real> WhiteBox<T> {
         CubicInFlow::from_poly(&self.balance_poly, speed_rpm)
     }
 
-    /// Checks a torque reference: finite and within 0..=100 %.
+    /// Checks a torque reference: finite and within 0..=100 %
+    /// ([`crate::units::checked_torque_pct`]: the white-box refuses what the torque rule
+    /// would clamp).
     pub fn check_torque(torque_ref_pct: T) -> Result<(), BenchError> {
-        if !torque_ref_pct.is_finite() {
-            Err(BenchError::NonFiniteTorque)
-        } else if torque_ref_pct < T::ZERO || torque_ref_pct > T::from_f64(100.0) {
-            Err(BenchError::TorqueOutOfRange)
-        } else {
-            Ok(())
-        }
+        checked_torque_pct(torque_ref_pct).map(|_| ())
     }
 
     /// dω/dt in rpm/s at `speed_rpm` with flow `flow_lps` and electromagnetic torque `te_pct`.
