@@ -5,7 +5,7 @@
 //! **metres of water column (mca)**, torques in **percent of the nominal torque** (39.9 Nm).
 
 use crate::error::BenchError;
-use crate::scalar::Real;
+use crate::scalar::{PerScalar, Real};
 
 /// Nominal motor torque, N·m: 100 % torque reference.
 pub const NOMINAL_TORQUE_NM: f64 = 39.9;
@@ -80,7 +80,7 @@ impl<T: Real> BenchParams<T> {
     /// time.
     #[inline]
     pub fn paper() -> Self {
-        *T::PAPER_BENCH.params()
+        T::per_scalar::<PaperParams>()
     }
 
     /// rpm/s of speed change per % of torque surplus: `(T_nom / 100) / J · 30/π` (≈ 42.95
@@ -94,7 +94,7 @@ impl<T: Real> BenchParams<T> {
     /// Checks every value: all finite, α1 < 0 (the pump head falls at high flow, so the flow
     /// balance always has a bounded largest root), k1 ≥ 0, k2 ≥ 0, J > 0, nominal torque > 0.
     pub fn validate(&self) -> Result<(), BenchError> {
-        T::validate_bench(self)
+        (T::per_scalar::<ValidateConst>())(self)
     }
 }
 
@@ -189,6 +189,24 @@ macro_rules! const_bench_params {
             }
         }
     };
+}
+
+/// `BenchParams::<f32>::PAPER` and `BenchParams::<f64>::PAPER`, for [`BenchParams::paper`].
+struct PaperParams;
+
+impl PerScalar for PaperParams {
+    type Of<R: Real> = BenchParams<R>;
+    const F32: BenchParams<f32> = BenchParams::<f32>::PAPER;
+    const F64: BenchParams<f64> = BenchParams::<f64>::PAPER;
+}
+
+/// Each type's `validate_const`, for [`BenchParams::validate`]: one set of rules.
+struct ValidateConst;
+
+impl PerScalar for ValidateConst {
+    type Of<R: Real> = fn(&BenchParams<R>) -> Result<(), BenchError>;
+    const F32: fn(&BenchParams<f32>) -> Result<(), BenchError> = BenchParams::<f32>::validate_const;
+    const F64: fn(&BenchParams<f64>) -> Result<(), BenchError> = BenchParams::<f64>::validate_const;
 }
 
 impl<T: Real> Default for BenchParams<T> {

@@ -9,7 +9,7 @@ use crate::flow::solve_flow;
 use crate::params::{
     BenchParams, FITTED_FLOW_MAX_LPS, FITTED_SPEED_MAX_RPM, FITTED_SPEED_MIN_RPM, RPM_PER_RAD_S,
 };
-use crate::scalar::Real;
+use crate::scalar::{PerScalar, Real};
 use crate::units::checked_torque_pct;
 
 /// Largest integration step accepted, s. RK4 is stable up to ≈ 0.6 s at the bench's fastest
@@ -207,18 +207,38 @@ macro_rules! const_white_box {
 const_white_box!(f32);
 const_white_box!(f64);
 
+/// `WhiteBox::<f32>::PAPER` and `WhiteBox::<f64>::PAPER`, for [`WhiteBox::paper`].
+struct PaperBench;
+
+impl PerScalar for PaperBench {
+    type Of<R: Real> = WhiteBox<R>;
+    const F32: WhiteBox<f32> = WhiteBox::<f32>::PAPER;
+    const F64: WhiteBox<f64> = WhiteBox::<f64>::PAPER;
+}
+
+/// Each type's `new_const`, for [`WhiteBox::new`]: one construction.
+struct NewConst;
+
+impl PerScalar for NewConst {
+    type Of<R: Real> = fn(BenchParams<R>) -> Result<WhiteBox<R>, BenchError>;
+    const F32: fn(BenchParams<f32>) -> Result<WhiteBox<f32>, BenchError> =
+        WhiteBox::<f32>::new_const;
+    const F64: fn(BenchParams<f64>) -> Result<WhiteBox<f64>, BenchError> =
+        WhiteBox::<f64>::new_const;
+}
+
 impl<T: Real> WhiteBox<T> {
     /// Validates `params` and builds the model (the `const fn` [`WhiteBox::new_const`] of
     /// `T`: one construction for run time and compile time).
     pub fn new(params: BenchParams<T>) -> Result<Self, BenchError> {
-        T::new_bench(params)
+        (T::per_scalar::<NewConst>())(params)
     }
 
     /// The paper's bench: a copy of compile-time data (`WhiteBox::<f32>::PAPER` or
     /// `WhiteBox::<f64>::PAPER`), nothing computed at run time.
     #[inline]
     pub fn paper() -> Self {
-        T::PAPER_BENCH
+        T::per_scalar::<PaperBench>()
     }
 
     /// rpm/s of speed change per % of torque surplus
