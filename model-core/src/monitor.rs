@@ -20,7 +20,7 @@
 //! (an acknowledge given while the cause stands is kept until the cause has gone, not lost).
 //! An alarm raised again after it cleared needs a new acknowledge.
 
-use crate::equations::{electromagnetic_torque_pct, load_torque_pct};
+use crate::equations::{electromagnetic_torque_pct, load_torque_from_motion_pct, load_torque_pct};
 use crate::observer::{Estimate, Use};
 use crate::params::{BenchParams, FITTED_FLOW_MAX_LPS};
 use crate::scalar::Real;
@@ -363,7 +363,7 @@ impl<T: Real> Monitor<T> {
             Some(t) if t.is_finite() => t,
             _ => electromagnetic_torque_pct(&self.gamma, applied_torque_pct(m.torque_ref_pct)),
         };
-        let shown = delivered - rate / accel;
+        let shown = load_torque_from_motion_pct(delivered, rate, accel);
         let needed = load_torque_pct(&self.beta, speed, flow);
         let fast = speed > c.min_speed_rpm && needed > T::ZERO;
         let ratio = if fast { shown / needed } else { T::ONE };

@@ -51,7 +51,12 @@
 //! their configured ranges; a non-finite result restores the last good estimate. No output
 //! is ever NaN.
 
-use crate::equations::{electromagnetic_torque_pct, CubicInFlow};
+use crate::equations::{
+    electromagnetic_torque_pct, flow_balance, flow_balance_dq, flow_root_sensitivities,
+    load_torque_partials, pipe_loss_dq, pipe_loss_mca, pump_head_partials, scaled_load_torque_pct,
+    speed_derivative_rpm_per_s, system_k, valve_pressure_mca, valve_pressure_partials, CubicInFlow,
+    Partials,
+};
 use crate::flow::solve_flow;
 use crate::params::BenchParams;
 use crate::scalar::Real;
@@ -344,26 +349,9 @@ struct Hydraulics<T> {
     /// dQ/d(ω, k2, s_H).
     dq: [T; 3],
     /// F_H(ω, Q) (unscaled) and its partials in ω and Q.
-    head: T,
-    head_w: T,
-    head_q: T,
+    head: Partials<T>,
     /// F_T(ω, Q) (unscaled) and its partials in ω and Q.
-    torque: T,
-    torque_w: T,
-    torque_q: T,
-}
-
-/// `p1 Q³ + p2 ω³ + p3 Q²ω + p4 Qω² + p5 Q² + p6 ω² + p7 Qω + p8 Q + p9 ω + p10` and its
-/// partials in ω and Q.
-fn poly_with_partials<T: Real>(p: &[T; 10], w: T, q: T) -> (T, T, T) {
-    let two = T::from_f64(2.0);
-    let three = T::from_f64(3.0);
-    let value = CubicInFlow::from_poly(p, w).eval(q);
-    let d_w =
-        three * p[1] * w * w + p[2] * q * q + two * p[3] * q * w + two * p[5] * w + p[6] * q + p[8];
-    let d_q =
-        three * p[0] * q * q + two * p[2] * q * w + p[3] * w * w + two * p[4] * q + p[6] * w + p[7];
-    (value, d_w, d_q)
+    torque: Partials<T>,
 }
 
 /// The observer.
@@ -465,7 +453,7 @@ impl<T: Real> Observer<T> {
             let mid = (lo + hi) * T::from_f64(0.5);
             x[SPEED] = mid;
             let h = self.hydraulics(&x);
-            if te - h.torque > T::ZERO {
+            if te - h.torque.value > T::ZERO {
                 lo = mid;
             } else {
                 hi = mid;
@@ -513,11 +501,8 @@ impl<T: Real> Observer<T> {
     fn flow(&mut self, x: &Vector<T>) -> T {
         let par = &self.cfg.params;
         let (w, k2, s_h) = (x[SPEED], x[K2], x[HEAD_SCALE]);
-        let mut g = CubicInFlow::from_poly(&par.alpha, w);
-        g.c3 = g.c3 * s_h;
-        g.c2 = g.c2 * s_h - (par.pipe_k1 + k2 * k2);
-        g.c1 = g.c1 * s_h;
-        g.c0 = g.c0 * s_h + par.static_head_c_mca;
+        let k = system_k(par.pipe_k1, k2);
+        let g = flow_balance(&par.alpha, s_h, k, par.static_head_c_mca, w);
         let q = solve_flow(&g, self.flow_warm).flow_lps;
         self.flow_warm = q;
         q
@@ -525,8 +510,8 @@ impl<T: Real> Observer<T> {
 
     /// dω/dt at `x` with electromagnetic torque `te` and flow `q` (l/s).
     fn speed_rate(&self, x: &Vector<T>, te: T, q: T) -> T {
-        let load = CubicInFlow::from_poly(&self.cfg.params.beta, x[SPEED]).eval(q);
-        self.accel * (te - x[TORQUE_SCALE] * load)
+        let load = scaled_load_torque_pct(&self.cfg.params.beta, x[TORQUE_SCALE], x[SPEED], q);
+        speed_derivative_rpm_per_s(te, load, self.accel)
     }
 
     /// The water column's time constant per unit of inertia at `x` for the flow balance's
@@ -534,8 +519,8 @@ impl<T: Real> Observer<T> {
     fn flow_tau_per_inertia(&self, x: &Vector<T>, q: T) -> T {
         let par = &self.cfg.params;
         let (w, k2, s_h) = (x[SPEED], x[K2], x[HEAD_SCALE]);
-        let slope = s_h * CubicInFlow::from_poly(&par.alpha, w).slope(q)
-            - T::from_f64(2.0) * (par.pipe_k1 + k2 * k2) * q;
+        let head_dq = CubicInFlow::from_poly(&par.alpha, w).slope(q);
+        let slope = flow_balance_dq(head_dq, s_h, system_k(par.pipe_k1, k2), q);
         // |∂g/∂Q| ≥ 0.05 mca per l/s: a flat balance (no flow) must not freeze the flow.
         T::ONE / slope.abs().max(T::from_f64(0.05))
     }
@@ -546,34 +531,19 @@ impl<T: Real> Observer<T> {
         let q = self.flow(x);
         let par = &self.cfg.params;
         let (w, k2, s_h) = (x[SPEED], x[K2], x[HEAD_SCALE]);
-        let (head, head_w, head_q) = poly_with_partials(&par.alpha, w, q);
-        let (torque, torque_w, torque_q) = poly_with_partials(&par.beta, w, q);
-        let two = T::from_f64(2.0);
-        let dq = if q > T::ZERO {
-            // g(Q; ω, k2, s_H) = 0: dQ/dθ = −(∂g/∂θ) / (∂g/∂Q).
-            let g_q = s_h * head_q - two * (par.pipe_k1 + k2 * k2) * q;
-            if g_q < T::ZERO {
-                [-(s_h * head_w) / g_q, (two * k2 * q * q) / g_q, -head / g_q]
-            } else {
-                [T::ZERO; 3]
-            }
-        } else {
-            [T::ZERO; 3]
-        };
+        let head = pump_head_partials(&par.alpha, w, q);
+        let torque = load_torque_partials(&par.beta, w, q);
+        let dq = flow_root_sensitivities(&head, s_h, par.pipe_k1, k2, q);
         Hydraulics {
             flow: q,
             dq,
             head,
-            head_w,
-            head_q,
             torque,
-            torque_w,
-            torque_q,
         }
     }
 
     fn outlet_pressure(&self, x: &Vector<T>, q: T) -> T {
-        x[K2] * x[K2] * q * q - self.cfg.params.static_head_c_mca
+        valve_pressure_mca(x[K2], self.cfg.params.static_head_c_mca, q)
     }
 
     /// Advances by `dt_s` seconds with the torque reference `torque_ref_pct` held (applied by
@@ -705,12 +675,13 @@ impl<T: Real> Observer<T> {
         let two = T::from_f64(2.0);
         let s_t = self.x[TORQUE_SCALE];
         let a = self.accel;
-        let a_ww = -a * s_t * (h0.torque_w + h0.torque_q * h0.dq[0]);
+        let (torque, torque_w, torque_q) = (h0.torque.value, h0.torque.d_speed, h0.torque.d_flow);
+        let a_ww = -a * s_t * (torque_w + torque_q * h0.dq[0]);
         let a_w = [
             a_ww,
-            -a * s_t * h0.torque_q * h0.dq[1],
-            -a * s_t * h0.torque_q * h0.dq[2],
-            -a * h0.torque,
+            -a * s_t * torque_q * h0.dq[1],
+            -a * s_t * torque_q * h0.dq[2],
+            -a * torque,
         ];
         let adt = a_ww * dt;
         // The rows of Φ that are not the identity's, for SPEED, PRESSURE_LAGGED and
@@ -722,12 +693,8 @@ impl<T: Real> Observer<T> {
         phi[0][2] = a_w[2] * through;
         phi[0][3] = a_w[3] * through;
         // Outlet pressure sensitivities at the start: Hs = k2² Q² − c.
-        let (k2, q0) = (self.x[K2], h0.flow);
-        let hs = [
-            two * k2 * k2 * q0 * h0.dq[0],
-            two * k2 * k2 * q0 * h0.dq[1] + two * k2 * q0 * q0,
-            two * k2 * k2 * q0 * h0.dq[2],
-        ];
+        let (hs_q, hs_k2) = valve_pressure_partials(self.x[K2], h0.flow);
+        let hs = [hs_q * h0.dq[0], hs_q * h0.dq[1] + hs_k2, hs_q * h0.dq[2]];
         let (ap, aq) = (k.pressure_decay, k.flow_decay);
         phi[1][PRESSURE_LAGGED] = ap;
         phi[2][FLOW_LAGGED] = aq;
@@ -857,7 +824,8 @@ impl<T: Real> Observer<T> {
     fn update_pressure(&mut self, y: Option<T>) -> Innovation<T> {
         let c = &self.cfg;
         let (lo, hi) = self.plausible_range(0);
-        let e = T::from_f64(2.0) * self.x[K2] * self.x[K2] * self.flow_now * self.inertia_flow_sd();
+        let (hs_q, _) = valve_pressure_partials(self.x[K2], self.flow_now);
+        let e = hs_q * self.inertia_flow_sd();
         let r = Self::lag_variance(
             c.pressure_sigma_mca,
             c.pressure_lag_sd_s,
@@ -1096,7 +1064,6 @@ impl<T: Real> Observer<T> {
         flow: Innovation<T>,
         speed: Innovation<T>,
     ) -> Estimate<T> {
-        let two = T::from_f64(2.0);
         let x = &self.x;
         let par = &self.cfg.params;
         // The flow through the water column's lag; the sensitivities are the root's.
@@ -1104,18 +1071,18 @@ impl<T: Real> Observer<T> {
         // Every derived quantity depends on (ω, k2, s_H) alone: sensitivities as 3-vectors.
         let j_q = h.dq;
         let e_q = self.inertia_flow_sd();
-        let e_p = two * k2 * k2 * q * e_q;
-        let a_p = two * k2 * k2 * q;
-        let j_p = [a_p * j_q[0], a_p * j_q[1] + two * k2 * q * q, a_p * j_q[2]];
+        let (a_p, hs_k2) = valve_pressure_partials(k2, q);
+        let e_p = a_p * e_q;
+        let j_p = [a_p * j_q[0], a_p * j_q[1] + hs_k2, a_p * j_q[2]];
         // Pump head s_H F_H(ω, Q(ω, k2, s_H)).
-        let head = s_h * h.head;
-        let a_h = s_h * h.head_q;
+        let head = s_h * h.head.value;
+        let a_h = s_h * h.head.d_flow;
         let j_h = [
-            a_h * j_q[0] + s_h * h.head_w,
+            a_h * j_q[0] + s_h * h.head.d_speed,
             a_h * j_q[1],
-            a_h * j_q[2] + h.head,
+            a_h * j_q[2] + h.head.value,
         ];
-        let pipe = par.pipe_k1 * q * q;
+        let pipe = pipe_loss_mca(par.pipe_k1, q);
         let rho_g = T::from_f64(RHO_G_W_PER_LPS_M);
         let power = rho_g * q * head;
         let j_pow: [T; 3] = core::array::from_fn(|a| rho_g * (head * j_q[a] + q * j_h[a]));
@@ -1130,7 +1097,7 @@ impl<T: Real> Observer<T> {
             pump_head_mca: head,
             pipe_loss_mca: pipe,
             hydraulic_power_w: power,
-            load_torque_pct: x[TORQUE_SCALE] * h.torque,
+            load_torque_pct: x[TORQUE_SCALE] * h.torque.value,
             speed_sd_rpm: self.sd_state(SPEED),
             flow_sd_lps: hypot(sd_q, e_q),
             pressure_sd_mca: hypot(self.sd3(&j_p), e_p),
@@ -1138,7 +1105,7 @@ impl<T: Real> Observer<T> {
             head_scale_sd: self.sd_state(HEAD_SCALE),
             torque_scale_sd: self.sd_state(TORQUE_SCALE),
             pump_head_sd_mca: self.sd3(&j_h),
-            pipe_loss_sd_mca: (two * par.pipe_k1 * q).abs() * sd_q,
+            pipe_loss_sd_mca: pipe_loss_dq(par.pipe_k1, q).abs() * sd_q,
             hydraulic_power_sd_w: self.sd3(&j_pow),
             pressure,
             flow,

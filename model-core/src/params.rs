@@ -75,20 +75,11 @@ pub struct BenchParams<T> {
 }
 
 impl<T: Real> BenchParams<T> {
-    /// The paper's coefficients (as printed), rounded to `T`: a copy of compile-time data
-    /// (`BenchParams::<f64>::PAPER` or `BenchParams::<f32>::PAPER`), no arithmetic at run
-    /// time.
-    #[inline]
-    pub fn paper() -> Self {
-        T::per_scalar::<PaperParams>()
-    }
-
     /// rpm/s of speed change per % of torque surplus: `(T_nom / 100) / J · 30/π` (≈ 42.95
     /// with the paper's J and T_nom), computed in `T` (in f32 within 2 ulps of the exact
     /// value; no f64 arithmetic on an f32 target). Gives what [`Self::accel_const`] gives.
     pub fn accel_rpm_per_s_per_pct(&self) -> T {
-        self.nominal_torque_nm / T::from_f64(100.0) / self.inertia_kg_m2
-            * T::from_f64(RPM_PER_RAD_S)
+        crate::equations::accel_rpm_per_s_per_pct(self.nominal_torque_nm, self.inertia_kg_m2)
     }
 
     /// Checks every value: all finite, α1 < 0 (the pump head falls at high flow, so the flow
@@ -185,19 +176,15 @@ macro_rules! const_bench_params {
             /// [`Self::accel_rpm_per_s_per_pct`] as a `const fn` (rpm/s per %): the same
             /// operations in the same order, so the same value.
             pub const fn accel_const(&self) -> $t {
-                self.nominal_torque_nm / 100.0 / self.inertia_kg_m2 * (RPM_PER_RAD_S as $t)
+                crate::equations::accel_expr!(
+                    self.nominal_torque_nm,
+                    self.inertia_kg_m2,
+                    100.0,
+                    RPM_PER_RAD_S as $t
+                )
             }
         }
     };
-}
-
-/// `BenchParams::<f32>::PAPER` and `BenchParams::<f64>::PAPER`, for [`BenchParams::paper`].
-struct PaperParams;
-
-impl PerScalar for PaperParams {
-    type Of<R: Real> = BenchParams<R>;
-    const F32: BenchParams<f32> = BenchParams::<f32>::PAPER;
-    const F64: BenchParams<f64> = BenchParams::<f64>::PAPER;
 }
 
 /// Each type's `validate_const`, for [`BenchParams::validate`]: one set of rules.
