@@ -424,6 +424,30 @@ mod tests {
     use super::*;
     use crate::modbus::crc16;
 
+    /// The link alarm gives the safe value; otherwise the workspace's torque rule, the
+    /// non-finite requests included (+∞ → 100 %, −∞ and NaN → 0 %), and the counts follow.
+    #[test]
+    fn applied_torque_is_the_safe_value_in_alarm_else_the_torque_rule() {
+        let inf = f32::INFINITY;
+        let cases = [
+            (-5.0, 0.0),
+            (0.0, 0.0),
+            (42.5, 42.5),
+            (100.0, 100.0),
+            (150.0, 100.0),
+            (inf, 100.0),
+            (-inf, 0.0),
+            (f32::NAN, 0.0),
+        ];
+        let map = VfdMap::example_16384();
+        for (requested, applied) in cases {
+            assert_eq!(applied_torque_pct(true, requested), 0.0, "{requested}");
+            assert_eq!(applied_torque_pct(false, requested), applied, "{requested}");
+            let counts = (applied / 100.0 * f32::from(map.counts_per_100_pct) + 0.5) as u16;
+            assert_eq!(map.torque_counts(requested), counts, "{requested}");
+        }
+    }
+
     /// The example map without the cycle: each exchange starts as soon as the last one ends,
     /// so the tests step the link exchange by exchange.
     fn unpaced() -> VfdMap {
