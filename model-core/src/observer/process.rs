@@ -216,27 +216,26 @@ impl<T: Real> StepConsts<T> {
             n += T::ONE;
         }
         let substep_s = dt / n;
-        let decay = |tau: T| {
-            if tau > T::ZERO {
-                (-dt / tau).exp()
-            } else {
-                T::ZERO
-            }
-        };
         Self {
             dt,
             substeps,
             substep_s,
-            pressure_decay: decay(cfg.pressure_lag_s),
-            flow_decay: decay(cfg.flow_lag_s),
+            pressure_decay: decay(dt, cfg.pressure_lag_s),
+            flow_decay: decay(dt, cfg.flow_lag_s),
             lag_p: Lag::new(cfg.pressure_lag_s, substep_s),
             lag_q: Lag::new(cfg.flow_lag_s, substep_s),
-            drive_decay: if cfg.drive_lag_s > T::ZERO {
-                (-substep_s / cfg.drive_lag_s).exp()
-            } else {
-                T::ZERO
-            },
+            drive_decay: decay(substep_s, cfg.drive_lag_s),
         }
+    }
+}
+
+/// A first-order lag's decay over `h` seconds, `e^{−h/τ}` (τ = `tau` in s; 0 without a lag,
+/// `tau` ≤ 0).
+fn decay<T: Real>(h: T, tau: T) -> T {
+    if tau > T::ZERO {
+        (-h / tau).exp()
+    } else {
+        T::ZERO
     }
 }
 
@@ -262,7 +261,7 @@ struct Lag<T> {
 impl<T: Real> Lag<T> {
     fn new(tau: T, h: T) -> Self {
         if tau > T::ZERO {
-            let a = (-h / tau).exp();
+            let a = decay(h, tau);
             Self {
                 a,
                 ramp: tau / h * (T::ONE - a),
