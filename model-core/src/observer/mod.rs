@@ -54,9 +54,9 @@
 //! # Layout
 //!
 //! The filter itself is here (prediction of the covariance, the measurement updates, the
-//! holds, the guards); [`config`] holds the tuning, `process` the bench's process model
+//! holds, the guards); `config` holds the tuning, `process` the bench's process model
 //! (the flow, the speed's rate, the transition matrix, the mean's integration) and
-//! [`estimate`] the derived outputs and their standard deviations.
+//! `estimate` the derived outputs and their standard deviations.
 
 use crate::equations::{electromagnetic_torque_pct, valve_pressure_partials};
 use crate::scalar::Real;
@@ -78,7 +78,7 @@ use process::{Hydraulics, StepConsts};
 /// Number of states.
 pub const STATES: usize = 6;
 // The states a prediction moves through Φ are SPEED, PRESSURE_LAGGED and FLOW_LAGGED (rows
-// 0, 1, 2 of `phi` in `predict`); the others are random walks.
+// 0, 1, 2 of `phi` in `process::transition`); the others are random walks.
 const _: () = assert!(SPEED == 0 && PRESSURE_LAGGED == 4 && FLOW_LAGGED == 5);
 /// Index of speed, rpm.
 pub const SPEED: usize = 0;
