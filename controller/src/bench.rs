@@ -26,6 +26,7 @@ use crate::link::{ScadaLink, VfdLink, VfdPort};
 use crate::modbus::Frame;
 use crate::vfd::VfdMap;
 use crate::vfdsim::{DriveValues, VfdSim};
+use model_core::equations::valve_pressure_mca;
 use model_core::excitation::SplitMix64;
 use model_core::{BenchError, BenchParams, BenchState, Scheme, Signals, WhiteBox};
 
@@ -194,9 +195,9 @@ impl VirtualBench {
     }
 
     fn state_pressure(&self) -> f32 {
-        // Hs = k2² Q² − c (eq. 8), without the full signal set.
+        // Hs = k2² Q² − c (eq. 8 inverted), without the full signal set.
         let p = self.bench.params();
-        p.valve_k2 * p.valve_k2 * self.state.flow_lps * self.state.flow_lps - p.static_head_c_mca
+        valve_pressure_mca(p.valve_k2, p.static_head_c_mca, self.state.flow_lps)
     }
 
     /// The bench's true signals (no transmitter).

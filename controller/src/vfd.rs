@@ -100,25 +100,23 @@ impl VfdMap {
             && self.fail_limit >= 1
     }
 
-    /// Torque reference counts for `pct` (NaN → 0, clamped to 0..=100 %).
+    /// Torque reference counts for `pct` (applied by the torque rule,
+    /// [`model_core::units::applied_torque_pct`]: clamped to 0..=100 %, NaN → 0).
     pub fn torque_counts(&self, pct: f32) -> u16 {
-        let pct = if pct.is_nan() {
-            0.0
-        } else {
-            pct.clamp(0.0, 100.0)
-        };
+        let pct = model_core::units::applied_torque_pct(pct);
         (pct / 100.0 * f32::from(self.counts_per_100_pct) + 0.5) as u16
     }
 }
 
 /// The torque reference applied for a requested one, %: the safe value 0 during the link
-/// alarm (and for NaN), else the request clamped to 0..=100. The one rule for the master and
-/// the core ([`crate::control::VfdStatus::applied_torque_pct`]).
+/// alarm, else the workspace's torque rule ([`model_core::units::applied_torque_pct`]:
+/// clamped to 0..=100, +∞ → 100, −∞ and NaN → 0). The one rule for the master and the core
+/// ([`crate::control::VfdStatus::applied_torque_pct`]).
 pub fn applied_torque_pct(link_alarm: bool, requested_pct: f32) -> f32 {
-    if link_alarm || requested_pct.is_nan() {
+    if link_alarm {
         0.0
     } else {
-        requested_pct.clamp(0.0, 100.0)
+        model_core::units::applied_torque_pct(requested_pct)
     }
 }
 
@@ -425,6 +423,30 @@ enum Answer {
 mod tests {
     use super::*;
     use crate::modbus::crc16;
+
+    /// The link alarm gives the safe value; otherwise the workspace's torque rule, the
+    /// non-finite requests included (+∞ → 100 %, −∞ and NaN → 0 %), and the counts follow.
+    #[test]
+    fn applied_torque_is_the_safe_value_in_alarm_else_the_torque_rule() {
+        let inf = f32::INFINITY;
+        let cases = [
+            (-5.0, 0.0),
+            (0.0, 0.0),
+            (42.5, 42.5),
+            (100.0, 100.0),
+            (150.0, 100.0),
+            (inf, 100.0),
+            (-inf, 0.0),
+            (f32::NAN, 0.0),
+        ];
+        let map = VfdMap::example_16384();
+        for (requested, applied) in cases {
+            assert_eq!(applied_torque_pct(true, requested), 0.0, "{requested}");
+            assert_eq!(applied_torque_pct(false, requested), applied, "{requested}");
+            let counts = (applied / 100.0 * f32::from(map.counts_per_100_pct) + 0.5) as u16;
+            assert_eq!(map.torque_counts(requested), counts, "{requested}");
+        }
+    }
 
     /// The example map without the cycle: each exchange starts as soon as the last one ends,
     /// so the tests step the link exchange by exchange.

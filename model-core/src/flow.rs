@@ -56,7 +56,8 @@ pub struct FlowSolution<T> {
     pub converged: bool,
 }
 
-/// The flow-balance cubic `g(Q) = F_H(ω, Q) − (k1 + k2²) Q² + c` at one speed.
+/// The flow-balance cubic `g(Q) = F_H(ω, Q) − (k1 + k2²) Q² + c` at one speed: the paper's
+/// pump curve, [`crate::equations::flow_balance`] with head scale 1.
 #[inline]
 pub fn balance_cubic<T: Real>(
     alpha: &[T; 10],
@@ -64,10 +65,13 @@ pub fn balance_cubic<T: Real>(
     static_head_c_mca: T,
     speed_rpm: T,
 ) -> CubicInFlow<T> {
-    let mut g = CubicInFlow::from_poly(alpha, speed_rpm);
-    g.c2 = g.c2 - system_k_mca_per_lps2;
-    g.c0 += static_head_c_mca;
-    g
+    crate::equations::flow_balance(
+        alpha,
+        T::ONE,
+        system_k_mca_per_lps2,
+        static_head_c_mca,
+        speed_rpm,
+    )
 }
 
 /// Solves `g(Q) = 0` for the largest non-negative root (see the module docs).

@@ -66,6 +66,7 @@ pub mod narmax;
 pub mod observer;
 pub mod params;
 pub mod scalar;
+pub mod units;
 pub mod whitebox;
 
 pub use error::BenchError;

@@ -20,10 +20,11 @@
 //! (an acknowledge given while the cause stands is kept until the cause has gone, not lost).
 //! An alarm raised again after it cleared needs a new acknowledge.
 
-use crate::equations::{electromagnetic_torque_pct, load_torque_pct};
-use crate::observer::{clamp_torque, Estimate, Use};
+use crate::equations::{electromagnetic_torque_pct, load_torque_from_motion_pct, load_torque_pct};
+use crate::observer::{Estimate, Use};
 use crate::params::{BenchParams, FITTED_FLOW_MAX_LPS};
 use crate::scalar::Real;
+use crate::units::applied_torque_pct;
 
 /// Bit of the pressure transmitter fault.
 pub const PRESSURE_TRANSMITTER: u16 = 1 << 0;
@@ -360,9 +361,9 @@ impl<T: Real> Monitor<T> {
         let flow = self.last_flow.map_or(e.flow_lps, |(q, _)| q);
         let delivered = match m.vfd_torque_pct {
             Some(t) if t.is_finite() => t,
-            _ => electromagnetic_torque_pct(&self.gamma, clamp_torque(m.torque_ref_pct)),
+            _ => electromagnetic_torque_pct(&self.gamma, applied_torque_pct(m.torque_ref_pct)),
         };
-        let shown = delivered - rate / accel;
+        let shown = load_torque_from_motion_pct(delivered, rate, accel);
         let needed = load_torque_pct(&self.beta, speed, flow);
         let fast = speed > c.min_speed_rpm && needed > T::ZERO;
         let ratio = if fast { shown / needed } else { T::ONE };

@@ -5,7 +5,7 @@
 //! **metres of water column (mca)**, torques in **percent of the nominal torque** (39.9 Nm).
 
 use crate::error::BenchError;
-use crate::scalar::Real;
+use crate::scalar::{PerScalar, Real};
 
 /// Nominal motor torque, N·m: 100 % torque reference.
 pub const NOMINAL_TORQUE_NM: f64 = 39.9;
@@ -75,26 +75,17 @@ pub struct BenchParams<T> {
 }
 
 impl<T: Real> BenchParams<T> {
-    /// The paper's coefficients (as printed), rounded to `T`: a copy of compile-time data
-    /// (`BenchParams::<f64>::PAPER` or `BenchParams::<f32>::PAPER`), no arithmetic at run
-    /// time.
-    #[inline]
-    pub fn paper() -> Self {
-        *T::PAPER_BENCH.params()
-    }
-
     /// rpm/s of speed change per % of torque surplus: `(T_nom / 100) / J · 30/π` (≈ 42.95
     /// with the paper's J and T_nom), computed in `T` (in f32 within 2 ulps of the exact
     /// value; no f64 arithmetic on an f32 target). Gives what [`Self::accel_const`] gives.
     pub fn accel_rpm_per_s_per_pct(&self) -> T {
-        self.nominal_torque_nm / T::from_f64(100.0) / self.inertia_kg_m2
-            * T::from_f64(RPM_PER_RAD_S)
+        crate::equations::accel_rpm_per_s_per_pct(self.nominal_torque_nm, self.inertia_kg_m2)
     }
 
     /// Checks every value: all finite, α1 < 0 (the pump head falls at high flow, so the flow
     /// balance always has a bounded largest root), k1 ≥ 0, k2 ≥ 0, J > 0, nominal torque > 0.
     pub fn validate(&self) -> Result<(), BenchError> {
-        T::validate_bench(self)
+        (T::per_scalar::<ValidateConst>())(self)
     }
 }
 
@@ -185,10 +176,24 @@ macro_rules! const_bench_params {
             /// [`Self::accel_rpm_per_s_per_pct`] as a `const fn` (rpm/s per %): the same
             /// operations in the same order, so the same value.
             pub const fn accel_const(&self) -> $t {
-                self.nominal_torque_nm / 100.0 / self.inertia_kg_m2 * (RPM_PER_RAD_S as $t)
+                crate::equations::accel_expr!(
+                    self.nominal_torque_nm,
+                    self.inertia_kg_m2,
+                    100.0,
+                    RPM_PER_RAD_S as $t
+                )
             }
         }
     };
+}
+
+/// Each type's `validate_const`, for [`BenchParams::validate`]: one set of rules.
+struct ValidateConst;
+
+impl PerScalar for ValidateConst {
+    type Of<R: Real> = fn(&BenchParams<R>) -> Result<(), BenchError>;
+    const F32: fn(&BenchParams<f32>) -> Result<(), BenchError> = BenchParams::<f32>::validate_const;
+    const F64: fn(&BenchParams<f64>) -> Result<(), BenchError> = BenchParams::<f64>::validate_const;
 }
 
 impl<T: Real> Default for BenchParams<T> {

@@ -7,8 +7,6 @@
 //! it when the flow-balance cubic is not monotone, which never happens with the paper's
 //! coefficients inside the fitted range (see [`crate::flow`]).
 
-use crate::whitebox::WhiteBox;
-use crate::{BenchError, BenchParams};
 use core::fmt::Debug;
 use core::ops::{Add, AddAssign, Div, Mul, Neg, Sub};
 
@@ -48,23 +46,43 @@ pub trait Real:
     fn tanh(self) -> Self;
     /// Exponential (`libm`).
     fn exp(self) -> Self;
-    /// The paper's white-box bench in this type (`WhiteBox::<f32>::PAPER`,
-    /// `WhiteBox::<f64>::PAPER`): compile-time data, behind [`WhiteBox::paper`] and
-    /// [`crate::BenchParams::paper`].
-    const PAPER_BENCH: WhiteBox<Self>;
-    /// [`BenchParams::validate`] for this type: its `const fn` (one set of rules for both).
-    fn validate_bench(p: &BenchParams<Self>) -> Result<(), BenchError>;
-    /// [`WhiteBox::new`] for this type: its `const fn`.
-    fn new_bench(p: BenchParams<Self>) -> Result<WhiteBox<Self>, BenchError>;
+    /// `P`'s value for this type ([`PerScalar::F32`] or [`PerScalar::F64`]): how generic code
+    /// reaches a model's compile-time data and `const fn`s of one concrete type.
+    fn per_scalar<P: PerScalar>() -> P::Of<Self>;
+}
+
+/// A value given once per scalar type, known at compile time: what a model written for
+/// f32 and f64 as `const` data and `const fn`s (generic `const fn` arithmetic is not possible
+/// on stable) hands to its generic, run-time API through [`Real::per_scalar`]. The trait
+/// knows nothing of the models: they implement it (e.g. the paper's bench, the `const fn`
+/// that validates a parameter set), and the layers point from the models to the scalar.
+///
+/// ```
+/// use model_core::scalar::{PerScalar, Real};
+/// struct Bits;
+/// impl PerScalar for Bits {
+///     type Of<R: Real> = u32;
+///     const F32: u32 = 32;
+///     const F64: u32 = 64;
+/// }
+/// fn bits<T: Real>() -> u32 {
+///     T::per_scalar::<Bits>()
+/// }
+/// assert_eq!((bits::<f32>(), bits::<f64>()), (32, 64));
+/// ```
+pub trait PerScalar {
+    /// The value's type for the scalar `R`.
+    type Of<R: Real>;
+    /// The value for `f32`.
+    const F32: Self::Of<f32>;
+    /// The value for `f64`.
+    const F64: Self::Of<f64>;
 }
 
 impl Real for f32 {
-    const PAPER_BENCH: WhiteBox<Self> = WhiteBox::<f32>::PAPER;
-    fn validate_bench(p: &BenchParams<Self>) -> Result<(), BenchError> {
-        p.validate_const()
-    }
-    fn new_bench(p: BenchParams<Self>) -> Result<WhiteBox<Self>, BenchError> {
-        WhiteBox::<f32>::new_const(p)
+    #[inline(always)]
+    fn per_scalar<P: PerScalar>() -> P::Of<Self> {
+        P::F32
     }
     const ZERO: Self = 0.0;
     const ONE: Self = 1.0;
@@ -118,12 +136,9 @@ impl Real for f32 {
 }
 
 impl Real for f64 {
-    const PAPER_BENCH: WhiteBox<Self> = WhiteBox::<f64>::PAPER;
-    fn validate_bench(p: &BenchParams<Self>) -> Result<(), BenchError> {
-        p.validate_const()
-    }
-    fn new_bench(p: BenchParams<Self>) -> Result<WhiteBox<Self>, BenchError> {
-        WhiteBox::<f64>::new_const(p)
+    #[inline(always)]
+    fn per_scalar<P: PerScalar>() -> P::Of<Self> {
+        P::F64
     }
     const ZERO: Self = 0.0;
     const ONE: Self = 1.0;

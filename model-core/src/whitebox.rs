@@ -1,15 +1,17 @@
 //! The white-box bench: one ODE in speed with the flow loop solved at every evaluation.
 
 use crate::equations::{
-    electromagnetic_torque_pct, load_torque_pct, pipe_loss_mca, pump_head_mca,
-    speed_derivative_rpm_per_s, valve_pressure_mca, CubicInFlow,
+    electromagnetic_torque_pct, flow_balance_poly, flow_balance_poly_expr, load_torque_pct,
+    pipe_loss_mca, pump_head_mca, speed_derivative_rpm_per_s, system_k, system_k_expr,
+    valve_pressure_mca, CubicInFlow,
 };
 use crate::error::BenchError;
 use crate::flow::solve_flow;
 use crate::params::{
     BenchParams, FITTED_FLOW_MAX_LPS, FITTED_SPEED_MAX_RPM, FITTED_SPEED_MIN_RPM, RPM_PER_RAD_S,
 };
-use crate::scalar::Real;
+use crate::scalar::{PerScalar, Real};
+use crate::units::checked_torque_pct;
 
 /// Largest integration step accepted, s. RK4 is stable up to ≈ 0.6 s at the bench's fastest
 /// time constant (≈ 0.22 s) and Euler up to ≈ 0.44 s; 0.1 s keeps every scheme well inside.
@@ -156,15 +158,6 @@ pub struct WhiteBox<T> {
     load_generation: u32,
 }
 
-/// α with the load folded in: the flow balance `F_H(ω, Q) − k Q² + c` as one polynomial.
-#[inline]
-fn balance_poly<T: Real>(alpha: &[T; 10], system_k: T, static_head_c_mca: T) -> [T; 10] {
-    let mut p = *alpha;
-    p[4] = p[4] - system_k;
-    p[9] += static_head_c_mca;
-    p
-}
-
 /// `const fn` constructors for one concrete scalar type (generic `const fn` arithmetic is not
 /// possible on stable): the same operations in the same order as [`WhiteBox::new`], so the
 /// same bench (a test holds them equal).
@@ -187,10 +180,10 @@ macro_rules! const_white_box {
                 if let Err(e) = params.validate_const() {
                     return Err(e);
                 }
-                let system_k = params.pipe_k1 + params.valve_k2 * params.valve_k2;
-                let mut balance_poly = params.alpha;
-                balance_poly[4] = balance_poly[4] - system_k;
-                balance_poly[9] += params.static_head_c_mca;
+                // The expressions of `equations::{system_k, flow_balance_poly}`.
+                let system_k = system_k_expr!(params.pipe_k1, params.valve_k2);
+                let balance_poly =
+                    flow_balance_poly_expr!(params.alpha, system_k, params.static_head_c_mca);
                 Ok(Self {
                     system_k,
                     accel: params.accel_const(),
@@ -206,18 +199,49 @@ macro_rules! const_white_box {
 const_white_box!(f32);
 const_white_box!(f64);
 
+impl<T: Real> BenchParams<T> {
+    /// The paper's coefficients (as printed), rounded to `T`: a copy of compile-time data
+    /// (`BenchParams::<f64>::PAPER` or `BenchParams::<f32>::PAPER`), no arithmetic at run
+    /// time. (Written here, beside [`WhiteBox::paper`], so that the target holds the set
+    /// once, inside the paper's bench.)
+    #[inline]
+    pub fn paper() -> Self {
+        *WhiteBox::<T>::paper().params()
+    }
+}
+
+/// `WhiteBox::<f32>::PAPER` and `WhiteBox::<f64>::PAPER`, for [`WhiteBox::paper`].
+struct PaperBench;
+
+impl PerScalar for PaperBench {
+    type Of<R: Real> = WhiteBox<R>;
+    const F32: WhiteBox<f32> = WhiteBox::<f32>::PAPER;
+    const F64: WhiteBox<f64> = WhiteBox::<f64>::PAPER;
+}
+
+/// Each type's `new_const`, for [`WhiteBox::new`]: one construction.
+struct NewConst;
+
+impl PerScalar for NewConst {
+    type Of<R: Real> = fn(BenchParams<R>) -> Result<WhiteBox<R>, BenchError>;
+    const F32: fn(BenchParams<f32>) -> Result<WhiteBox<f32>, BenchError> =
+        WhiteBox::<f32>::new_const;
+    const F64: fn(BenchParams<f64>) -> Result<WhiteBox<f64>, BenchError> =
+        WhiteBox::<f64>::new_const;
+}
+
 impl<T: Real> WhiteBox<T> {
     /// Validates `params` and builds the model (the `const fn` [`WhiteBox::new_const`] of
     /// `T`: one construction for run time and compile time).
     pub fn new(params: BenchParams<T>) -> Result<Self, BenchError> {
-        T::new_bench(params)
+        (T::per_scalar::<NewConst>())(params)
     }
 
     /// The paper's bench: a copy of compile-time data (`WhiteBox::<f32>::PAPER` or
     /// `WhiteBox::<f64>::PAPER`), nothing computed at run time.
     #[inline]
     pub fn paper() -> Self {
-        T::PAPER_BENCH
+        T::per_scalar::<PaperBench>()
     }
 
     /// rpm/s of speed change per % of torque surplus
@@ -244,8 +268,8 @@ impl<T: Real> WhiteBox<T> {
         }
         self.params.valve_k2 = valve_k2;
         self.params.static_head_c_mca = static_head_c_mca;
-        self.system_k = self.params.pipe_k1 + valve_k2 * valve_k2;
-        self.balance_poly = balance_poly(&self.params.alpha, self.system_k, static_head_c_mca);
+        self.system_k = system_k(self.params.pipe_k1, valve_k2);
+        self.balance_poly = flow_balance_poly(&self.params.alpha, self.system_k, static_head_c_mca);
         self.load_generation = self.load_generation.wrapping_add(1);
         Ok(())
     }
@@ -256,22 +280,19 @@ impl<T: Real> WhiteBox<T> {
         solve_flow(&self.balance(speed_rpm), warm_start_lps).flow_lps
     }
 
-    /// The flow-balance cubic at `speed_rpm` (see [`crate::flow`]; the same as
-    /// [`crate::flow::balance_cubic`] up to rounding: the load is folded into α beforehand).
+    /// The flow-balance cubic at `speed_rpm` (see [`crate::flow`]): the load folded into α
+    /// beforehand ([`crate::equations::flow_balance_poly`]; the same as
+    /// [`crate::equations::flow_balance`] with scale 1 up to rounding).
     #[inline]
     pub fn balance(&self, speed_rpm: T) -> CubicInFlow<T> {
         CubicInFlow::from_poly(&self.balance_poly, speed_rpm)
     }
 
-    /// Checks a torque reference: finite and within 0..=100 %.
+    /// Checks a torque reference: finite and within 0..=100 %
+    /// ([`crate::units::checked_torque_pct`]: the white-box refuses what the torque rule
+    /// would clamp).
     pub fn check_torque(torque_ref_pct: T) -> Result<(), BenchError> {
-        if !torque_ref_pct.is_finite() {
-            Err(BenchError::NonFiniteTorque)
-        } else if torque_ref_pct < T::ZERO || torque_ref_pct > T::from_f64(100.0) {
-            Err(BenchError::TorqueOutOfRange)
-        } else {
-            Ok(())
-        }
+        checked_torque_pct(torque_ref_pct).map(|_| ())
     }
 
     /// dω/dt in rpm/s at `speed_rpm` with flow `flow_lps` and electromagnetic torque `te_pct`.
