@@ -12,8 +12,9 @@
 //!   checks the budgets: no kernel more than [`KERNEL_TOLERANCE`] over `bench/baseline.json`,
 //!   no image over its flash or RAM budget ([`Board::budget`]).
 
-use super::{build_firmware, cargo, field, firmware_elf, num, root, run, target_dir, Board};
-use super::{Result, TARGET};
+use crate::board::{build_firmware, firmware_elf, Board};
+use crate::qemu::qemu_output;
+use crate::util::{cargo, field, num, root, run, target_dir, Result, TARGET};
 use object::{Object, ObjectSection, ObjectSymbol, SectionFlags, SymbolKind};
 use serde::Serialize;
 use std::collections::{BTreeMap, HashSet};
@@ -300,10 +301,32 @@ pub struct Report {
 }
 
 /// Options of `cargo xtask bench`.
-#[derive(Debug, Default)]
+#[derive(Debug, Default, PartialEq)]
 pub struct Options {
     /// Write the figures measured to `bench/baseline.json` instead of checking against it.
     pub save_baseline: bool,
+}
+
+/// `cargo xtask bench`'s usage.
+pub const BENCH_USAGE: &str = "usage: cargo xtask bench [--save-baseline]
+  (no option)       build and run mcu-bench in QEMU (-icount shift=0), measure both firmware
+                    images; print the tables, write mcu.json under the target directory's
+                    bench/; fail if a kernel costs more than 5 % over bench/baseline.json or an
+                    image exceeds its flash or RAM budget
+  --save-baseline   the same, then write the figures to bench/baseline.json (new budgets)";
+
+impl Options {
+    /// `cargo xtask bench`'s arguments (after `bench`): none, or `--save-baseline` (anything
+    /// after it is ignored).
+    pub fn parse(args: &[String]) -> Result<Self> {
+        match args.first().map(String::as_str) {
+            None => Ok(Options::default()),
+            Some("--save-baseline") => Ok(Options {
+                save_baseline: true,
+            }),
+            Some(other) => Err(format!("unknown option '{other}'\n{BENCH_USAGE}")),
+        }
+    }
 }
 
 /// Thousands separated by spaces, as the README writes them.
@@ -379,13 +402,13 @@ pub fn run_bench(o: &Options) -> Result {
         let elf = bin_dir.join(bin);
         // Each probe runs its parts once and must exit 0 (a probe that faults measures
         // nothing).
-        crate::qemu_output(&elf, &[])?;
+        qemu_output(&elf, &[])?;
         let (size, _, _) = read_elf(&elf, 0)?;
         parts.insert(*key, size);
         part_sizes.push(size);
     }
     eprintln!("==> mcu-bench in QEMU (netduinoplus2, -icount shift=0)");
-    let rows = parse_rows(&crate::qemu_output(&bin_dir.join("mcu-bench"), &[])?)?;
+    let rows = parse_rows(&qemu_output(&bin_dir.join("mcu-bench"), &[])?)?;
     let (kernels, empty) = kernels(&rows)?;
     let rounded: BTreeMap<String, i64> = kernels
         .iter()
@@ -547,9 +570,34 @@ pub fn run_bench(o: &Options) -> Result {
     eprintln!("    bench: {:.1} s", start.elapsed().as_secs_f64());
 
     // The budgets.
+    let failed = budget_failures(base, o.save_baseline, &rounded, &report.images);
+    if failed.is_empty() {
+        println!(
+            "bench: every kernel within +{:.0} % of bench/baseline.json, every image within its budget",
+            100.0 * KERNEL_TOLERANCE
+        );
+        Ok(())
+    } else {
+        for f in &failed {
+            println!("BUDGET FAILED: {f}");
+        }
+        Err(format!("bench: {} budget(s) exceeded", failed.len()))
+    }
+}
+
+/// The budgets a bench's figures break: every kernel of `base` (`bench/baseline.json`; none
+/// when saving it, `save_baseline`) measured (`rounded`) and at most [`KERNEL_TOLERANCE`] over
+/// it, every image within its flash and RAM budget and free of software f64 (when
+/// [`FORBID_SOFT_F64`]); one message per failure.
+fn budget_failures(
+    base: Option<&serde_json::Value>,
+    save_baseline: bool,
+    rounded: &BTreeMap<String, i64>,
+    images: &BTreeMap<&'static str, Image>,
+) -> Vec<String> {
     let mut failed = vec![];
     match base {
-        _ if o.save_baseline => {}
+        _ if save_baseline => {}
         None => failed.push(format!(
             "no {}: the kernels have no budget (cargo xtask bench --save-baseline writes one)",
             baseline_path().display()
@@ -579,7 +627,7 @@ pub fn run_bench(o: &Options) -> Result {
             }
         }
     }
-    for (key, im) in &report.images {
+    for (key, im) in images {
         for (what, n, budget) in [
             ("flash", im.size.flash, im.flash_budget),
             ("RAM", im.size.ram, im.ram_budget),
@@ -600,18 +648,7 @@ pub fn run_bench(o: &Options) -> Result {
             ));
         }
     }
-    if failed.is_empty() {
-        println!(
-            "bench: every kernel within +{:.0} % of bench/baseline.json, every image within its budget",
-            100.0 * KERNEL_TOLERANCE
-        );
-        Ok(())
-    } else {
-        for f in &failed {
-            println!("BUDGET FAILED: {f}");
-        }
-        Err(format!("bench: {} budget(s) exceeded", failed.len()))
-    }
+    failed
 }
 
 #[cfg(test)]
@@ -678,5 +715,99 @@ mod tests {
         assert_eq!(group(1000), "1 000");
         assert_eq!(group(65536), "65 536");
         assert_eq!(group(-1234567), "−1 234 567");
+    }
+
+    fn image(flash: u64, ram: u64, soft_f64: &[&str]) -> Image {
+        Image {
+            size: Size {
+                flash,
+                ram,
+                ..Size::default()
+            },
+            flash_budget: 1000,
+            ram_budget: 100,
+            largest: vec![],
+            soft_f64: soft_f64.iter().map(|s| s.to_string()).collect(),
+        }
+    }
+
+    #[test]
+    fn budgets() {
+        let base: serde_json::Value = serde_json::from_str(
+            r#"{"tick_mean": 1, "kernels": {"a": 1000, "b": 200, "gone": 5}}"#,
+        )
+        .unwrap();
+        let measured = |a: i64, b: i64| -> BTreeMap<String, i64> {
+            [
+                ("a".to_string(), a),
+                ("b".to_string(), b),
+                ("new".to_string(), 9),
+            ]
+            .into()
+        };
+        let images: BTreeMap<&'static str, Image> = [
+            ("qemu", image(1000, 100, &[])),
+            ("nucleo-f446re", image(10, 1, &[])),
+        ]
+        .into();
+        // Within +5 % (1 050 of 1 000 is the limit), a kernel faster, a new one: only the
+        // kernel the baseline has and the bench no longer measures fails.
+        let failed = budget_failures(Some(&base), false, &measured(1050, 100), &images);
+        assert_eq!(
+            failed,
+            ["kernel gone: in bench/baseline.json (5) but not measured (rename or remove it there)"]
+        );
+        let mut base_ok = base.clone();
+        base_ok["kernels"].as_object_mut().unwrap().remove("gone");
+        assert!(budget_failures(Some(&base_ok), false, &measured(1050, 100), &images).is_empty());
+        // One instruction over the limit.
+        assert_eq!(
+            budget_failures(Some(&base_ok), false, &measured(1051, 100), &images),
+            ["kernel a: 1 051 instructions per call, +5.1 % over bench/baseline.json's 1 000 (limit +5 %)"]
+        );
+        // Without `kernels`, the top-level figures are the budgets.
+        let top: serde_json::Value =
+            serde_json::from_str(r#"{"rk4_step": 100, "tick_mean": 10}"#).unwrap();
+        let m: BTreeMap<String, i64> =
+            [("rk4_step".to_string(), 106), ("tick_mean".to_string(), 10)].into();
+        assert_eq!(budget_failures(Some(&top), false, &m, &images).len(), 1);
+        // No baseline: a failure, unless it is being saved.
+        assert_eq!(
+            budget_failures(None, false, &measured(1, 1), &images).len(),
+            1
+        );
+        assert!(budget_failures(None, true, &measured(1, 1), &images).is_empty());
+        assert!(budget_failures(Some(&base), true, &measured(9999, 1), &images).is_empty());
+        // Images: one byte over a budget, software f64 (checked when saving too).
+        let over: BTreeMap<&'static str, Image> = [
+            ("qemu", image(1001, 100, &[])),
+            ("nucleo-f446re", image(10, 101, &["__adddf3"])),
+        ]
+        .into();
+        assert_eq!(
+            budget_failures(Some(&base_ok), true, &measured(1, 1), &over),
+            [
+                "nucleo-f446re image: RAM 101 B, 1 B over its budget of 100 B",
+                "nucleo-f446re image: software f64 routines linked in: __adddf3",
+                "qemu image: flash 1 001 B, 1 B over its budget of 1 000 B",
+            ]
+        );
+    }
+
+    #[test]
+    fn options() {
+        let args = |s: &str| -> Vec<String> { s.split_whitespace().map(str::to_string).collect() };
+        assert_eq!(Options::parse(&[]), Ok(Options::default()));
+        assert!(!Options::default().save_baseline);
+        assert_eq!(
+            Options::parse(&args("--save-baseline")),
+            Ok(Options {
+                save_baseline: true
+            })
+        );
+        assert_eq!(
+            Options::parse(&args("--save")),
+            Err(format!("unknown option '--save'\n{BENCH_USAGE}"))
+        );
     }
 }
