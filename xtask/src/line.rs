@@ -25,6 +25,7 @@ pub fn frame(body: &[u8]) -> Vec<u8> {
 }
 
 impl Port {
+    /// The client side of the line at `path`, raw and non-blocking.
     pub fn open(path: &str) -> Result<Self> {
         let fd = open(
             path,

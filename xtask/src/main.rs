@@ -20,6 +20,7 @@ mod bridge;
 mod ci;
 mod defmt_log;
 mod e2e;
+mod elf;
 mod flood;
 mod line;
 mod mbpoll;
