@@ -5,14 +5,24 @@
 //!   pseudo-terminal.
 //! - `bench`: the kernels' instructions per call on the MCU (mcu-bench under QEMU), the
 //!   images' and model-core's parts' size from their ELF, checked against
-//!   `bench/baseline.json` and the size budgets (see [`bench`]).
+//!   `bench/baseline.json` and the size budgets (see [`bench`](mod@bench)).
 //! - `test`: everything CI checks: rustfmt, clippy `-D warnings` (host, both firmware boards
 //!   and mcu-bench), the no_std crates built for the MCU, the host tests, docs, the bench and
 //!   its budgets (both firmware images), QEMU runs whose every log line must equal the same
 //!   loop replayed on the host bit for bit, and an end-to-end test with `mbpoll` on the SCADA
 //!   port.
 //!
+//! - `replay`, `e2e`, `flood`: one part of `test` alone (the on-target checks and the QEMU
+//!   runs against the host replay; the end-to-end test; the flood).
+//!
 //! Needs `qemu-system-arm` and `mbpoll` on the PATH (Debian packages of the same names).
+//!
+//! This file only dispatches. The tasks: [`qemu_task`], [`bench`](mod@bench), [`ci`] (`test`),
+//! [`replay`], [`e2e`] (with [`observe_session`], [`protection_session`] and [`line`](mod@line)'s
+//! checks, `mbpoll` through [`mbpoll`]), [`flood`](mod@flood). What they share: [`util`] (cargo, paths,
+//! a step run, `key=value` fields), [`board`] (the boards' images and their build), [`qemu`]
+//! (QEMU's runs, deterministic or real time), [`defmt_log`] (the logs decoded), [`bridge`]
+//! (the SCADA pty's bridge), [`elf`] (an image's sizes and symbols).
 
 mod bench;
 mod board;
