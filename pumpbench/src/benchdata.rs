@@ -40,9 +40,9 @@
 //! With none of these (or all at their defaults) the record is byte for byte what it was
 //! before they existed.
 
+use crate::error::Failure;
 use crate::input::{shown, TorqueInput};
 use crate::num::Short;
-use crate::Failure;
 use model_core::equations::{
     electromagnetic_torque_pct, load_torque_pct, speed_derivative_rpm_per_s, valve_pressure_mca,
 };

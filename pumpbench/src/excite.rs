@@ -1,7 +1,7 @@
 //! `pumpbench excite`: the paper's excitation — pulses of uncorrelated amplitudes, uniform in a
 //! torque range, held for random whole numbers of samples.
 
-use crate::Failure;
+use crate::error::Failure;
 use model_core::excitation::PulseTrain;
 use std::io::Write;
 

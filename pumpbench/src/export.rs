@@ -3,9 +3,9 @@
 //! (`NarxF32::build`, `NarxQ15::build`), so the compiler checks, re-lays-out and quantises
 //! the model and a bad one is a build error; plus the generic f32 pass, the host's reference.
 
+use crate::error::Failure;
 use crate::modelfile::ModelFile;
 use crate::num::Short;
-use crate::Failure;
 use model_core::narmax::mcu::{firmware_period_ms, NarxF32, NarxQ15};
 use std::io::Write;
 

@@ -1,8 +1,8 @@
 //! The NARMAX model file (JSON): weights in NNSYSID layout, scaling, lags, sample period,
 //! target, and training metadata. Checked when read: a bad file is refused before any run.
 
+use crate::error::Failure;
 use crate::num::Short;
-use crate::Failure;
 use model_core::narmax::mcu::{NarxQ15, NnsysidModel};
 use model_core::narmax::{Lags, Narmax, NarmaxError, Scaling};
 use model_core::Real;

@@ -1,5 +1,6 @@
 //! NARMAX commands: `identify`, and the narmax forms of `simulate`, `steady`, `validate`.
 
+use crate::error::Failure;
 use crate::input::{read_series, Series};
 use crate::modelfile::{
     in_firmware_range, HostNarxQ15, LagsFile, ModelFile, ScalingFile, Target, Training, FORMAT,
@@ -7,7 +8,6 @@ use crate::modelfile::{
 };
 use crate::num::Short;
 use crate::train::{identify, Data, Structure};
-use crate::Failure;
 use indicatif::{ProgressBar, ProgressStyle};
 use model_core::narmax::Predictor;
 use model_core::Real;

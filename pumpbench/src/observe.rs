@@ -19,11 +19,11 @@
 //! `inf` or a number beyond f64 (`1e999`) is passed to the observer as it is, which refuses it
 //! as implausible (and the monitor raises that transmitter's fault bit).
 
+use crate::error::Failure;
 use crate::input::{read_gappy_series, InputError};
 use crate::num::{Float, Short};
 use crate::output::{check_outputs, write_csv, Named};
 use crate::plots::{self, ObservePanel};
-use crate::Failure;
 use indicatif::{ProgressBar, ProgressStyle};
 use model_core::monitor::{Monitor, MonitorConfig, MonitorInputs};
 use model_core::observer::{Estimate, Measurements, Observer, ObserverConfig, Use, MAX_DT_S};

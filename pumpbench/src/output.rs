@@ -1,6 +1,6 @@
 //! Output to stdout or to a file that appears only when complete.
 
-use crate::Failure;
+use crate::error::Failure;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 

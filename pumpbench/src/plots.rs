@@ -3,8 +3,8 @@
 //! Text goes through plotters' `ab_glyph` renderer with Noto Sans Regular embedded in the
 //! binary (crate `ttf-noto-sans`, font under Apache-2.0): no system font is needed.
 
+use crate::error::Failure;
 use crate::study::TargetResult;
-use crate::Failure;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::{register_font, FontStyle};

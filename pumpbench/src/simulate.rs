@@ -1,9 +1,9 @@
 //! The `simulate` and `steady` commands for the white-box model.
 
+use crate::error::Failure;
 use crate::input::TorqueInput;
 use crate::num::Float;
 use crate::num::Short;
-use crate::Failure;
 use indicatif::{ProgressBar, ProgressStyle};
 use model_core::{Real, Scheme, Signals, WhiteBox};
 use std::io::Write;

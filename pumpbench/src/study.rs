@@ -4,12 +4,13 @@
 //! figures 4, 5, 7 and 8 as PNG files. With `--demo` it first makes all of its data with the
 //! synthetic bench (`excite` + `bench-data`), so the whole study runs without a bench.
 
+use crate::error::Failure;
 use crate::input::{read_columns, read_input_to_integrate, read_series, Series, TorqueInput};
 use crate::modelfile::{ModelFile, Target};
 use crate::narmaxcmd::{self, Identify};
 use crate::num::Short;
 use crate::train::Structure;
-use crate::{benchdata, excite, output, plots, Failure};
+use crate::{benchdata, excite, output, plots};
 use model_core::{Scheme, Signals, WhiteBox};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};

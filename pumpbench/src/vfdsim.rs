@@ -3,7 +3,7 @@
 //! virtual bench runs) driving a virtual bench ([`controller::bench::VirtualBench`]) in real
 //! time with the torque reference it is written.
 
-use crate::Failure;
+use crate::error::Failure;
 use controller::bench::{VirtualBench, VirtualBenchConfig};
 use controller::modbus::Frame;
 use controller::rtu::RtuFramer;

@@ -12,13 +12,14 @@
 //!   checks the budgets: no kernel more than [`KERNEL_TOLERANCE`] over `bench/baseline.json`,
 //!   no image over its flash or RAM budget ([`Board::budget`]).
 
-use super::{build_firmware, cargo, field, firmware_elf, num, root, run, target_dir, Board};
-use super::{Result, TARGET};
-use object::{Object, ObjectSection, ObjectSymbol, SectionFlags, SymbolKind};
+use crate::board::{build_firmware, firmware_elf, Board};
+use crate::elf::{read_elf, Size, Symbol};
+use crate::qemu::qemu_output;
+use crate::util::{cargo, field, num, root, run, target_dir, Result, TARGET};
 use serde::Serialize;
-use std::collections::{BTreeMap, HashSet};
+use std::collections::BTreeMap;
 use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
 /// How much a kernel may cost over its figure in `bench/baseline.json` before the bench fails
@@ -74,32 +75,6 @@ pub fn json_path() -> PathBuf {
     target_dir().join("bench").join("mcu.json")
 }
 
-/// Bytes of an image by kind, from its ELF sections.
-#[derive(Debug, Default, Clone, Copy, Serialize)]
-pub struct Size {
-    /// text + rodata + data: what is programmed into flash.
-    pub flash: u64,
-    /// data + bss: static RAM.
-    pub ram: u64,
-    /// Executable sections.
-    pub text: u64,
-    /// Read-only data (and the vector table).
-    pub rodata: u64,
-    /// Initialised data (in flash and in RAM).
-    pub data: u64,
-    /// Zeroed and uninitialised data (`.bss`, `.uninit`).
-    pub bss: u64,
-}
-
-/// One symbol of an image.
-#[derive(Debug, Clone, Serialize)]
-pub struct Symbol {
-    /// Size, bytes.
-    pub bytes: u64,
-    /// Demangled name.
-    pub name: String,
-}
-
 /// What an ELF image holds.
 #[derive(Debug, Clone, Serialize)]
 pub struct Image {
@@ -114,89 +89,6 @@ pub struct Image {
     pub largest: Vec<Symbol>,
     /// Software-f64 routines linked in.
     pub soft_f64: Vec<String>,
-}
-
-/// `true` for a compiler-builtins routine of software double precision: the ARM EABI names
-/// (`__aeabi_dadd`, `__aeabi_dcmpeq`, `__aeabi_d2f`, `__aeabi_f2d`, `__aeabi_i2d`, …) and the
-/// GCC ones (`__adddf3`, `__eqdf2`, `__extendsfdf2`, `__truncdfsf2`, `__fixdfsi`,
-/// `__floatsidf`, `__powidf2`, …).
-pub fn is_soft_f64(name: &str) -> bool {
-    if let Some(rest) = name.strip_prefix("__aeabi_") {
-        return (rest.starts_with('d') && !rest.starts_with("div")) || rest.ends_with("2d");
-    }
-    name.strip_prefix("__").is_some_and(|rest| {
-        rest.contains("df")
-            && rest
-                .chars()
-                .all(|c| c.is_ascii_lowercase() || c.is_ascii_digit())
-    })
-}
-
-/// Sizes, largest symbols and software-f64 routines of the ELF at `path`.
-pub fn read_elf(path: &Path, largest: usize) -> Result<(Size, Vec<Symbol>, Vec<String>)> {
-    let what = |e: &dyn std::fmt::Display| format!("{}: {e}", path.display());
-    let bytes = std::fs::read(path).map_err(|e| what(&e))?;
-    let file = object::File::parse(&*bytes).map_err(|e| what(&e))?;
-    let mut s = Size::default();
-    let (alloc, write, exec) = (
-        object::elf::SHF_ALLOC.0,
-        object::elf::SHF_WRITE.0,
-        object::elf::SHF_EXECINSTR.0,
-    );
-    for section in file.sections() {
-        let SectionFlags::Elf { sh_type, sh_flags } = section.flags() else {
-            return Err(what(&"not an ELF section"));
-        };
-        let sh_flags = sh_flags.0;
-        if sh_flags & alloc == 0 {
-            continue;
-        }
-        let n = section.size();
-        if sh_type == object::elf::SHT_NOBITS {
-            s.bss += n;
-        } else if sh_flags & write != 0 {
-            s.data += n;
-        } else if sh_flags & exec != 0 {
-            s.text += n;
-        } else {
-            s.rodata += n;
-        }
-    }
-    s.flash = s.text + s.rodata + s.data;
-    s.ram = s.data + s.bss;
-    let mut seen = HashSet::new();
-    let mut symbols: Vec<Symbol> = file
-        .symbols()
-        .filter(|sym| {
-            sym.is_definition()
-                && sym.size() > 0
-                && matches!(sym.kind(), SymbolKind::Text | SymbolKind::Data)
-                // Aliases: one entry per (address, size); Thumb code addresses have bit 0 set.
-                && seen.insert((sym.address() & !1, sym.size()))
-        })
-        .filter_map(|sym| {
-            Some(Symbol {
-                bytes: sym.size(),
-                name: format!("{:#}", rustc_demangle::demangle(sym.name().ok()?)),
-            })
-        })
-        .collect();
-    symbols.sort_by(|a, b| b.bytes.cmp(&a.bytes).then_with(|| a.name.cmp(&b.name)));
-    symbols.truncate(largest);
-    // The EABI names are C symbols; compiler-builtins' GCC-named routines are mangled Rust
-    // (`compiler_builtins::float::add::__adddf3`): the demangled name's last segment.
-    let mut soft: Vec<String> = file
-        .symbols()
-        .filter(|sym| sym.is_definition())
-        .filter_map(|sym| {
-            let name = format!("{:#}", rustc_demangle::demangle(sym.name().ok()?));
-            let routine = name.rsplit("::").next().unwrap_or(&name);
-            is_soft_f64(routine).then(|| routine.to_string())
-        })
-        .collect();
-    soft.sort();
-    soft.dedup();
-    Ok((s, symbols, soft))
 }
 
 /// One row the bench image printed.
@@ -300,10 +192,32 @@ pub struct Report {
 }
 
 /// Options of `cargo xtask bench`.
-#[derive(Debug, Default)]
+#[derive(Debug, Default, PartialEq)]
 pub struct Options {
     /// Write the figures measured to `bench/baseline.json` instead of checking against it.
     pub save_baseline: bool,
+}
+
+/// `cargo xtask bench`'s usage.
+pub const BENCH_USAGE: &str = "usage: cargo xtask bench [--save-baseline]
+  (no option)       build and run mcu-bench in QEMU (-icount shift=0), measure both firmware
+                    images; print the tables, write mcu.json under the target directory's
+                    bench/; fail if a kernel costs more than 5 % over bench/baseline.json or an
+                    image exceeds its flash or RAM budget
+  --save-baseline   the same, then write the figures to bench/baseline.json (new budgets)";
+
+impl Options {
+    /// `cargo xtask bench`'s arguments (after `bench`): none, or `--save-baseline` (anything
+    /// after it is ignored).
+    pub fn parse(args: &[String]) -> Result<Self> {
+        match args.first().map(String::as_str) {
+            None => Ok(Options::default()),
+            Some("--save-baseline") => Ok(Options {
+                save_baseline: true,
+            }),
+            Some(other) => Err(format!("unknown option '{other}'\n{BENCH_USAGE}")),
+        }
+    }
 }
 
 /// Thousands separated by spaces, as the docs (docs/measurements.md) write them.
@@ -379,13 +293,13 @@ pub fn run_bench(o: &Options) -> Result {
         let elf = bin_dir.join(bin);
         // Each probe runs its parts once and must exit 0 (a probe that faults measures
         // nothing).
-        crate::qemu_output(&elf, &[])?;
+        qemu_output(&elf, &[])?;
         let (size, _, _) = read_elf(&elf, 0)?;
         parts.insert(*key, size);
         part_sizes.push(size);
     }
     eprintln!("==> mcu-bench in QEMU (netduinoplus2, -icount shift=0)");
-    let rows = parse_rows(&crate::qemu_output(&bin_dir.join("mcu-bench"), &[])?)?;
+    let rows = parse_rows(&qemu_output(&bin_dir.join("mcu-bench"), &[])?)?;
     let (kernels, empty) = kernels(&rows)?;
     let rounded: BTreeMap<String, i64> = kernels
         .iter()
@@ -415,6 +329,50 @@ pub fn run_bench(o: &Options) -> Result {
 
     // The tables.
     let base = baseline.as_ref();
+    print!("{}", tables(&report, &kernels, &part_sizes, base, empty));
+
+    let json = serde_json::to_string_pretty(&report).map_err(|e| e.to_string())? + "\n";
+    let path = json_path();
+    if let Some(dir) = path.parent() {
+        std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    }
+    std::fs::write(&path, &json).map_err(|e| format!("{}: {e}", path.display()))?;
+    println!("\nwrote {}", path.display());
+    if o.save_baseline {
+        std::fs::write(baseline_path(), &json)
+            .map_err(|e| format!("{}: {e}", baseline_path().display()))?;
+        println!("wrote {} (the new budgets)", baseline_path().display());
+    }
+    eprintln!("    bench: {:.1} s", start.elapsed().as_secs_f64());
+
+    // The budgets.
+    let failed = budget_failures(base, o.save_baseline, &rounded, &report.images);
+    if failed.is_empty() {
+        println!(
+            "bench: every kernel within +{:.0} % of bench/baseline.json, every image within its budget",
+            100.0 * KERNEL_TOLERANCE
+        );
+        Ok(())
+    } else {
+        for f in &failed {
+            println!("BUDGET FAILED: {f}");
+        }
+        Err(format!("bench: {} budget(s) exceeded", failed.len()))
+    }
+}
+
+/// The bench's Markdown tables: the kernels (instructions per call less the `empty` call's,
+/// against their reference row and `base`, `bench/baseline.json`), the images, the size
+/// probes (`part_sizes`, in [`PARTS`]' order), each image's largest symbols and its software
+/// f64.
+fn tables(
+    report: &Report,
+    kernels: &[Kernel],
+    part_sizes: &[Size],
+    base: Option<&serde_json::Value>,
+    empty: f64,
+) -> String {
+    let rounded = &report.kernels;
     let mut t = String::new();
     let _ = writeln!(
         t,
@@ -425,7 +383,7 @@ pub fn run_bench(o: &Options) -> Result {
         "| kernel | instructions per call | calls | compared with | ratio | bench/baseline.json | change |"
     );
     let _ = writeln!(t, "|---|---:|---:|---|---:|---:|---:|");
-    for k in &kernels {
+    for k in kernels {
         let n = rounded[&k.name];
         let (vs, ratio) = match k.baseline.as_ref().and_then(|b| Some((b, rounded.get(b)?))) {
             Some((b, &bn)) if bn > 0 => (b.as_str(), format!("{:.2}×", n as f64 / bn as f64)),
@@ -530,26 +488,22 @@ pub fn run_bench(o: &Options) -> Result {
             }
         );
     }
-    print!("{t}");
+    t
+}
 
-    let json = serde_json::to_string_pretty(&report).map_err(|e| e.to_string())? + "\n";
-    let path = json_path();
-    if let Some(dir) = path.parent() {
-        std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
-    }
-    std::fs::write(&path, &json).map_err(|e| format!("{}: {e}", path.display()))?;
-    println!("\nwrote {}", path.display());
-    if o.save_baseline {
-        std::fs::write(baseline_path(), &json)
-            .map_err(|e| format!("{}: {e}", baseline_path().display()))?;
-        println!("wrote {} (the new budgets)", baseline_path().display());
-    }
-    eprintln!("    bench: {:.1} s", start.elapsed().as_secs_f64());
-
-    // The budgets.
+/// The budgets a bench's figures break: every kernel of `base` (`bench/baseline.json`; none
+/// when saving it, `save_baseline`) measured (`rounded`) and at most [`KERNEL_TOLERANCE`] over
+/// it, every image within its flash and RAM budget and free of software f64 (when
+/// [`FORBID_SOFT_F64`]); one message per failure.
+fn budget_failures(
+    base: Option<&serde_json::Value>,
+    save_baseline: bool,
+    rounded: &BTreeMap<String, i64>,
+    images: &BTreeMap<&'static str, Image>,
+) -> Vec<String> {
     let mut failed = vec![];
     match base {
-        _ if o.save_baseline => {}
+        _ if save_baseline => {}
         None => failed.push(format!(
             "no {}: the kernels have no budget (cargo xtask bench --save-baseline writes one)",
             baseline_path().display()
@@ -579,7 +533,7 @@ pub fn run_bench(o: &Options) -> Result {
             }
         }
     }
-    for (key, im) in &report.images {
+    for (key, im) in images {
         for (what, n, budget) in [
             ("flash", im.size.flash, im.flash_budget),
             ("RAM", im.size.ram, im.ram_budget),
@@ -600,60 +554,12 @@ pub fn run_bench(o: &Options) -> Result {
             ));
         }
     }
-    if failed.is_empty() {
-        println!(
-            "bench: every kernel within +{:.0} % of bench/baseline.json, every image within its budget",
-            100.0 * KERNEL_TOLERANCE
-        );
-        Ok(())
-    } else {
-        for f in &failed {
-            println!("BUDGET FAILED: {f}");
-        }
-        Err(format!("bench: {} budget(s) exceeded", failed.len()))
-    }
+    failed
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn soft_f64_names() {
-        for n in [
-            "__aeabi_dadd",
-            "__aeabi_dcmpeq",
-            "__aeabi_d2f",
-            "__aeabi_d2iz",
-            "__aeabi_f2d",
-            "__aeabi_i2d",
-            "__aeabi_ul2d",
-            "__adddf3",
-            "__muldf3",
-            "__eqdf2",
-            "__unorddf2",
-            "__extendsfdf2",
-            "__truncdfsf2",
-            "__fixdfsi",
-            "__floatunsidf",
-            "__powidf2",
-        ] {
-            assert!(is_soft_f64(n), "{n}");
-        }
-        for n in [
-            "__aeabi_fadd",
-            "__aeabi_uidiv",
-            "__aeabi_idiv0",
-            "__aeabi_memcpy",
-            "__addsf3",
-            "__sbss",
-            "__defmt_default_timestamp",
-            "_ZN4libm4math5tanhf5tanhf17h0123456789abcdefE",
-            "main",
-        ] {
-            assert!(!is_soft_f64(n), "{n}");
-        }
-    }
 
     #[test]
     fn rows_and_kernels() {
@@ -678,5 +584,157 @@ mod tests {
         assert_eq!(group(1000), "1 000");
         assert_eq!(group(65536), "65 536");
         assert_eq!(group(-1234567), "−1 234 567");
+    }
+
+    fn image(flash: u64, ram: u64, soft_f64: &[&str]) -> Image {
+        Image {
+            size: Size {
+                flash,
+                ram,
+                ..Size::default()
+            },
+            flash_budget: 1000,
+            ram_budget: 100,
+            largest: vec![],
+            soft_f64: soft_f64.iter().map(|s| s.to_string()).collect(),
+        }
+    }
+
+    #[test]
+    fn budgets() {
+        let base: serde_json::Value = serde_json::from_str(
+            r#"{"tick_mean": 1, "kernels": {"a": 1000, "b": 200, "gone": 5}}"#,
+        )
+        .unwrap();
+        let measured = |a: i64, b: i64| -> BTreeMap<String, i64> {
+            [
+                ("a".to_string(), a),
+                ("b".to_string(), b),
+                ("new".to_string(), 9),
+            ]
+            .into()
+        };
+        let images: BTreeMap<&'static str, Image> = [
+            ("qemu", image(1000, 100, &[])),
+            ("nucleo-f446re", image(10, 1, &[])),
+        ]
+        .into();
+        // Within +5 % (1 050 of 1 000 is the limit), a kernel faster, a new one: only the
+        // kernel the baseline has and the bench no longer measures fails.
+        let failed = budget_failures(Some(&base), false, &measured(1050, 100), &images);
+        assert_eq!(
+            failed,
+            ["kernel gone: in bench/baseline.json (5) but not measured (rename or remove it there)"]
+        );
+        let mut base_ok = base.clone();
+        base_ok["kernels"].as_object_mut().unwrap().remove("gone");
+        assert!(budget_failures(Some(&base_ok), false, &measured(1050, 100), &images).is_empty());
+        // One instruction over the limit.
+        assert_eq!(
+            budget_failures(Some(&base_ok), false, &measured(1051, 100), &images),
+            ["kernel a: 1 051 instructions per call, +5.1 % over bench/baseline.json's 1 000 (limit +5 %)"]
+        );
+        // Without `kernels`, the top-level figures are the budgets.
+        let top: serde_json::Value =
+            serde_json::from_str(r#"{"rk4_step": 100, "tick_mean": 10}"#).unwrap();
+        let m: BTreeMap<String, i64> =
+            [("rk4_step".to_string(), 106), ("tick_mean".to_string(), 10)].into();
+        assert_eq!(budget_failures(Some(&top), false, &m, &images).len(), 1);
+        // No baseline: a failure, unless it is being saved.
+        assert_eq!(
+            budget_failures(None, false, &measured(1, 1), &images).len(),
+            1
+        );
+        assert!(budget_failures(None, true, &measured(1, 1), &images).is_empty());
+        assert!(budget_failures(Some(&base), true, &measured(9999, 1), &images).is_empty());
+        // Images: one byte over a budget, software f64 (checked when saving too).
+        let over: BTreeMap<&'static str, Image> = [
+            ("qemu", image(1001, 100, &[])),
+            ("nucleo-f446re", image(10, 101, &["__adddf3"])),
+        ]
+        .into();
+        assert_eq!(
+            budget_failures(Some(&base_ok), true, &measured(1, 1), &over),
+            [
+                "nucleo-f446re image: RAM 101 B, 1 B over its budget of 100 B",
+                "nucleo-f446re image: software f64 routines linked in: __adddf3",
+                "qemu image: flash 1 001 B, 1 B over its budget of 1 000 B",
+            ]
+        );
+    }
+
+    #[test]
+    fn options() {
+        let args = |s: &str| -> Vec<String> { s.split_whitespace().map(str::to_string).collect() };
+        assert_eq!(Options::parse(&[]), Ok(Options::default()));
+        assert!(!Options::default().save_baseline);
+        assert_eq!(
+            Options::parse(&args("--save-baseline")),
+            Ok(Options {
+                save_baseline: true
+            })
+        );
+        assert_eq!(
+            Options::parse(&args("--save")),
+            Err(format!("unknown option '--save'\n{BENCH_USAGE}"))
+        );
+    }
+
+    #[test]
+    fn the_tables() {
+        let out = "row name=empty calls=10 ticks=168 max=17\nrow name=a calls=2 ticks=3360 max=1700\nrow name=b baseline=a max_name=b_max calls=4 ticks=3360 max=1008\ndone\n";
+        let (k, empty) = kernels(&parse_rows(out).unwrap()).unwrap();
+        let rounded: BTreeMap<String, i64> = k
+            .iter()
+            .map(|k| (k.name.clone(), k.instructions.round() as i64))
+            .collect();
+        let report = Report {
+            narmax_pressure_f32: 0,
+            narmax_pressure_fixed: 0,
+            narmax_flow_f32: 0,
+            narmax_flow_fixed: 0,
+            rk4_step: 0,
+            tick_mean: 0,
+            tick_max: 0,
+            observer_update: None,
+            images: [("qemu", image(900, 50, &[]))].into(),
+            kernels: rounded,
+            parts: BTreeMap::new(),
+            empty_call: 100.0,
+            units: "",
+        };
+        let base: serde_json::Value = serde_json::from_str(
+            r#"{"kernels": {"a": 9000, "b_max": 5900}, "images": {"qemu": {"flash": 1000, "ram": 40}}}"#,
+        )
+        .unwrap();
+        let sizes: Vec<Size> = (0..PARTS.len() as u64)
+            .map(|i| Size {
+                flash: 1000 + 2500 * i,
+                ram: 10 * i,
+                ..Size::default()
+            })
+            .collect();
+        let t = tables(&report, &k, &sizes, Some(&base), empty);
+        for row in [
+            "less the empty call: 100.0)",
+            "| a | 9 900 | 2 |  |  | 9 000 | +10.0 % |",
+            "| b | 4 900 | 4 | a | 0.49× | — | new |",
+            "| b_max | 5 900 | max of 4 |  |  | 5 900 | +0.0 % |",
+            "| qemu | 900 | 90.0 % of 1 000 | 50 | 50.0 % of 100 | 0 | 0 | 0 | 0 | 1 000, 40 |",
+            "| part_base | runtime only (cortex-m-rt, semihosting exit) | 1 000 | 0 |  |  |",
+            "| part_whitebox | + white-box bench, f32 | 3 500 | 10 | +2 500 | +10 |",
+            "software f64 in the qemu image (0 routines, forbidden): none",
+        ] {
+            assert!(t.contains(&format!("{row}\n")), "{row} not in:\n{t}");
+        }
+        // Without a baseline, every kernel is new.
+        let t = tables(&report, &k, &sizes, None, empty);
+        assert!(t.contains("| a | 9 900 | 2 |  |  | — | new |\n"), "{t}");
+        assert!(
+            t.contains(
+                "| qemu | 900 | 90.0 % of 1 000 | 50 | 50.0 % of 100 | 0 | 0 | 0 | 0 | — |\n"
+            ),
+            "{t}"
+        );
     }
 }

@@ -17,7 +17,7 @@
 //! dropped), the next client's bytes wait; so a client sees only answers to its own requests,
 //! unless the controller took longer than [`QUIET_MS`] to answer the one that left.
 
-use super::Result;
+use crate::util::Result;
 use nix::fcntl::{open, OFlag};
 use nix::poll::{poll, PollFd, PollFlags, PollTimeout};
 use nix::pty::{grantpt, posix_openpt, ptsname_r, unlockpt, PtyMaster};

@@ -1,0 +1,97 @@
+//! What every task uses: cargo and the workspace's paths, a step run with its time, and the
+//! `key=value` fields of the firmware's and the bench's log lines.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Instant;
+
+/// The MCU's target triple (both boards, mcu-bench).
+pub const TARGET: &str = "thumbv7em-none-eabihf";
+
+/// A task's result: its error is the message `cargo xtask` prints.
+pub type Result<T = ()> = std::result::Result<T, String>;
+
+/// The cargo that runs xtask (`CARGO`), else `cargo` on the PATH.
+pub fn cargo() -> Command {
+    Command::new(std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into()))
+}
+
+/// The workspace's root directory.
+pub fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .expect("xtask lives in the workspace")
+        .to_path_buf()
+}
+
+/// Runs `cmd` at the workspace root as the step `what`, printing its name and its time (s);
+/// an error if it cannot start or exits non-zero.
+pub fn run(what: &str, cmd: &mut Command) -> Result {
+    let start = Instant::now();
+    eprintln!("==> {what}");
+    let status = cmd
+        .current_dir(root())
+        .status()
+        .map_err(|e| format!("{what}: cannot start: {e}"))?;
+    eprintln!("    {what}: {:.1} s", start.elapsed().as_secs_f64());
+    if status.success() {
+        Ok(())
+    } else {
+        Err(format!("{what} failed ({status})"))
+    }
+}
+
+/// Cargo's target directory (`CARGO_TARGET_DIR`, else `target/` at the root).
+pub fn target_dir() -> PathBuf {
+    std::env::var_os("CARGO_TARGET_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| root().join("target"))
+}
+
+/// The value of the first whitespace-separated word `key=value` of `line` (an error naming
+/// the line if there is none).
+pub fn field<'a>(line: &'a str, key: &str) -> Result<&'a str> {
+    line.split_whitespace()
+        .find_map(|w| w.strip_prefix(key).and_then(|r| r.strip_prefix('=')))
+        .ok_or_else(|| format!("no '{key}=' in line: {line}"))
+}
+
+/// [`field`] parsed as a `T` (an error naming the line if it does not parse).
+pub fn num<T: std::str::FromStr>(line: &str, key: &str) -> Result<T> {
+    field(line, key)?
+        .parse()
+        .map_err(|_| format!("bad '{key}' in line: {line}"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fields_of_a_line() {
+        let line = "row name=narmax_f32 baseline=x calls=400 ticks=12345 max=7";
+        assert_eq!(field(line, "name"), Ok("narmax_f32"));
+        assert_eq!(field(line, "calls"), Ok("400"));
+        assert_eq!(num::<u64>(line, "ticks"), Ok(12345));
+        // A key is a whole word's prefix up to '=': `max` is not `max_name`, `base` is not
+        // `baseline`.
+        assert_eq!(field("max_name=a max=3", "max"), Ok("3"));
+        assert!(field(line, "base").is_err());
+        assert!(field(line, "row").is_err());
+        assert_eq!(
+            field(line, "seed"),
+            Err(format!("no 'seed=' in line: {line}"))
+        );
+        assert_eq!(
+            num::<u8>(line, "ticks"),
+            Err(format!("bad 'ticks' in line: {line}"))
+        );
+        assert_eq!(field("a= b=1", "a"), Ok(""));
+    }
+
+    #[test]
+    fn paths() {
+        assert!(root().join("xtask").join("Cargo.toml").is_file());
+        assert!(root().join("Cargo.toml").is_file());
+    }
+}
