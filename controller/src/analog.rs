@@ -37,6 +37,11 @@ pub const VALID_LOW_MA: f32 = 3.8;
 /// Upper end of the valid signal band (mA).
 pub const VALID_HIGH_MA: f32 = 20.5;
 
+/// The pump bench's pressure transmitter: 0..10 mca on a [`LoopConfig::typical`] loop.
+pub const PRESSURE_LOOP: LoopConfig = LoopConfig::typical(0.0, 10.0);
+/// The pump bench's flow transmitter: 0..30 l/s on a [`LoopConfig::typical`] loop.
+pub const FLOW_LOOP: LoopConfig = LoopConfig::typical(0.0, 30.0);
+
 /// A transmitter's noise, unit variance, one draw from `rng`: the sum of four uniform draws
 /// (24 bits of a SplitMix64 word each), scaled to unit variance. Bounded (±√12 ≈ ±3.46 σ),
 /// cheap on an MCU without `log`/`cos`, and the same sequence on host and target.

@@ -19,7 +19,7 @@
 //! The noise is [`crate::analog::noise`]: the sum of four uniform draws (SplitMix64), scaled
 //! to unit variance.
 
-use crate::analog::{noise, LoopConfig};
+use crate::analog::{noise, LoopConfig, FLOW_LOOP, PRESSURE_LOOP};
 use crate::control::{
     Commands, Config, Controller, Error, Inputs, NarmaxModel, Outputs, VfdStatus,
 };
@@ -63,8 +63,8 @@ pub struct VirtualBenchConfig {
 pub const DRIVE_SPEED_LIMIT_BAND_RPM: f32 = 50.0;
 
 impl VirtualBenchConfig {
-    /// J +5 %, load torque +2 %, valve k2 +2 %; transmitters 0..10 mca and 0..30 l/s on
-    /// [`LoopConfig::typical`] loops, lags 20 / 40 ms, noise 3 mm / 0.02 l/s; the drive's
+    /// J +5 %, load torque +2 %, valve k2 +2 %; the bench's transmitters ([`PRESSURE_LOOP`]
+    /// 0..10 mca, [`FLOW_LOOP`] 0..30 l/s), lags 20 / 40 ms, noise 3 mm / 0.02 l/s; the drive's
     /// speed limit at 2 100 rpm (120 % of the motor's nominal 1 750).
     pub const fn default_offsets(seed: u64) -> Self {
         Self {
@@ -75,8 +75,8 @@ impl VirtualBenchConfig {
             flow_lag_s: 0.04,
             pressure_noise_mca: 0.003,
             flow_noise_lps: 0.02,
-            pressure_loop: LoopConfig::typical(0.0, 10.0),
-            flow_loop: LoopConfig::typical(0.0, 30.0),
+            pressure_loop: PRESSURE_LOOP,
+            flow_loop: FLOW_LOOP,
             seed,
             drive_speed_limit_rpm: 2100.0,
         }

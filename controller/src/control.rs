@@ -31,7 +31,7 @@
 //! Nothing here touches hardware, so the core runs in host tests and in the host replay of
 //! the QEMU run, bit for bit.
 
-use crate::analog::{AnalogInput, LoopConfig, Status as InputStatus};
+use crate::analog::{AnalogInput, LoopConfig, Status as InputStatus, FLOW_LOOP, PRESSURE_LOOP};
 use crate::protect::{Protection, ProtectionConfig};
 use crate::types::{Arithmetic, Mode, Published, Status};
 use crate::vfd::{VfdMap, VfdReadings};
@@ -98,13 +98,13 @@ pub struct Config {
 }
 
 impl Config {
-    /// Pressure 0..10 mca and flow 0..30 l/s on [`LoopConfig::typical`] loops, the
-    /// [`VfdMap::example_16384`] drive, SCADA unit 1, profile seed 1, stopped, NARMAX in f32,
-    /// no virtual bench.
+    /// The bench's transmitters (pressure 0..10 mca, flow 0..30 l/s: [`PRESSURE_LOOP`],
+    /// [`FLOW_LOOP`]), the [`VfdMap::example_16384`] drive, SCADA unit 1, profile seed 1,
+    /// stopped, NARMAX in f32, no virtual bench.
     pub const fn bench() -> Self {
         Self {
-            pressure_loop: LoopConfig::typical(0.0, 10.0),
-            flow_loop: LoopConfig::typical(0.0, 30.0),
+            pressure_loop: PRESSURE_LOOP,
+            flow_loop: FLOW_LOOP,
             vfd: VfdMap::example_16384(),
             scada_unit: 1,
             profile_seed: 1,
