@@ -1,5 +1,15 @@
-//! 4-20 mA transmitter inputs: ADC code → loop current → engineering value, with NAMUR NE 43
-//! fault detection.
+//! The 4-20 mA transmitters and the ADC that reads them, both ways: the one model of them in
+//! the workspace.
+//!
+//! - Decoding, as the controller's inputs do ([`AnalogInput`]): ADC code → loop current →
+//!   NAMUR NE 43 status → engineering value.
+//! - Encoding, as the virtual bench (`crate::bench`) and `pumpbench bench-data` make their
+//!   readings: value + [`noise`] → loop current with the transmitter's span, saturated at NE
+//!   43's measuring range ([`LoopConfig::transmitter_ma`]) → ADC code
+//!   ([`LoopConfig::code`]).
+//!
+//! The front end is a shunt read by an ADC ([`LoopConfig::typical`]: 150 Ω on a 12-bit,
+//! 3.3 V ADC, full scale 22 mA in 4 096 codes).
 //!
 //! NE 43 bands (loop current I):
 //! - 3.8 ≤ I ≤ 20.5 mA: a measurement (3.8..4 and 20..20.5 mA are under/over range, the value
@@ -16,6 +26,8 @@
 //! ADC cannot place a current closer than that, and a healthy transmitter at NE 43's 3.8 mA
 //! floor reads one code under it.
 
+use model_core::excitation::SplitMix64;
+
 /// Below this loop current (mA) the transmitter is faulty (NE 43: broken wire).
 pub const FAULT_LOW_MA: f32 = 3.6;
 /// Above this loop current (mA) the transmitter is faulty (NE 43: short circuit).
@@ -24,6 +36,22 @@ pub const FAULT_HIGH_MA: f32 = 21.0;
 pub const VALID_LOW_MA: f32 = 3.8;
 /// Upper end of the valid signal band (mA).
 pub const VALID_HIGH_MA: f32 = 20.5;
+
+/// The pump bench's pressure transmitter: 0..10 mca on a [`LoopConfig::typical`] loop.
+pub const PRESSURE_LOOP: LoopConfig = LoopConfig::typical(0.0, 10.0);
+/// The pump bench's flow transmitter: 0..30 l/s on a [`LoopConfig::typical`] loop.
+pub const FLOW_LOOP: LoopConfig = LoopConfig::typical(0.0, 30.0);
+
+/// A transmitter's noise, unit variance, one draw from `rng`: the sum of four uniform draws
+/// (24 bits of a SplitMix64 word each), scaled to unit variance. Bounded (±√12 ≈ ±3.46 σ),
+/// cheap on an MCU without `log`/`cos`, and the same sequence on host and target.
+pub fn noise(rng: &mut SplitMix64) -> f32 {
+    let mut s = 0.0f32;
+    for _ in 0..4 {
+        s += (rng.next_u64() >> 40) as f32 / (1u64 << 24) as f32;
+    }
+    (s - 2.0) * 1.732_050_8
+}
 
 /// One 4-20 mA input: the shunt and ADC that read it, and the transmitter's span.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -70,6 +98,26 @@ impl LoopConfig {
             && self.clear_samples >= 1
     }
 
+    /// The ADC code of a loop current (mA), rounded to the nearest code within 0..=full scale
+    /// (2^bits − 1); NaN reads 0. The inverse of [`Self::current_ma`] within half a code.
+    pub fn code(&self, current_ma: f32) -> u16 {
+        let full = ((1u32 << self.adc_bits) - 1) as f32;
+        let code = current_ma * 1e-3 * self.shunt_ohm / self.adc_ref_v * full + 0.5;
+        if code.is_nan() {
+            0
+        } else {
+            code.clamp(0.0, full) as u16
+        }
+    }
+
+    /// The loop current (mA) a transmitter with this span drives for `value` (engineering
+    /// units): 4..20 mA over the span, saturated at NE 43's measuring range
+    /// ([`VALID_LOW_MA`]..=[`VALID_HIGH_MA`]) as a healthy transmitter does; NaN stays NaN.
+    pub fn transmitter_ma(&self, value: f32) -> f32 {
+        let span = self.value_at_20ma - self.value_at_4ma;
+        (4.0 + 16.0 * (value - self.value_at_4ma) / span).clamp(VALID_LOW_MA, VALID_HIGH_MA)
+    }
+
     /// Loop current (mA) for an ADC code (codes above full scale read as full scale).
     pub fn current_ma(&self, code: u16) -> f32 {
         let full = ((1u32 << self.adc_bits) - 1) as f32;
@@ -77,10 +125,16 @@ impl LoopConfig {
         code / full * self.adc_ref_v / self.shunt_ohm * 1000.0
     }
 
-    /// Engineering value for a loop current, clamped to the span (4..20 mA).
+    /// Engineering value for a loop current, clamped to the span (4..20 mA): what the
+    /// controller's input uses.
     pub fn value(&self, current_ma: f32) -> f32 {
-        let i = current_ma.clamp(4.0, 20.0);
-        self.value_at_4ma + (i - 4.0) / 16.0 * (self.value_at_20ma - self.value_at_4ma)
+        self.value_unclamped(current_ma.clamp(4.0, 20.0))
+    }
+
+    /// Engineering value for a loop current on the span's line, not clamped (3.8 mA on a
+    /// 0..10 span is −0.125): what a logger records over the measuring range.
+    pub fn value_unclamped(&self, current_ma: f32) -> f32 {
+        self.value_at_4ma + (current_ma - 4.0) / 16.0 * (self.value_at_20ma - self.value_at_4ma)
     }
 }
 
@@ -187,12 +241,103 @@ impl AnalogInput {
 mod tests {
     use super::*;
 
-    /// ADC code for a loop current with the typical front end.
+    /// ADC code for a loop current (the shared encoder).
     fn code(c: &LoopConfig, ma: f32) -> u16 {
-        let full = ((1u32 << c.adc_bits) - 1) as f32;
-        (ma / 1000.0 * c.shunt_ohm / c.adc_ref_v * full)
-            .round()
-            .min(full) as u16
+        c.code(ma)
+    }
+
+    #[test]
+    fn every_code_is_its_own_current_encoded() {
+        for c in [
+            LoopConfig::typical(0.0, 10.0),
+            LoopConfig {
+                adc_bits: 16,
+                ..LoopConfig::typical(0.0, 10.0)
+            },
+        ] {
+            let full = (1u32 << c.adc_bits) - 1;
+            for k in 0..=full {
+                assert_eq!(u32::from(c.code(c.current_ma(k as u16))), k, "{c:?}");
+            }
+            assert_eq!(u32::from(c.code(1e3)), full, "above full scale");
+            assert_eq!((c.code(-1.0), c.code(f32::NAN)), (0, 0));
+        }
+        // The typical front end: 22 mA over 4 095 steps.
+        let c = LoopConfig::typical(0.0, 10.0);
+        assert!((c.current_ma(4095) - 22.0).abs() < 1e-5);
+        assert_eq!(c.code(12.0), (12.0f32 / 22.0 * 4095.0).round() as u16);
+    }
+
+    /// Value → transmitter → ADC code → input: within one code's worth of the value inside
+    /// the span, for a rising and a falling span.
+    #[test]
+    fn a_value_encoded_reads_back_within_one_code() {
+        for c in [
+            LoopConfig::typical(0.0, 10.0),
+            LoopConfig::typical(0.0, 30.0),
+            LoopConfig::typical(30.0, -5.0),
+        ] {
+            let (lo, hi) = (c.value_at_4ma, c.value_at_20ma);
+            let lsb = c.current_ma(1) / 16.0 * (hi - lo).abs();
+            let mut a = AnalogInput::new(c).unwrap();
+            for k in 0..=1000 {
+                let v = lo + (hi - lo) * k as f32 / 1000.0;
+                let r = a.sample(c.code(c.transmitter_ma(v)));
+                assert!((r.value - v).abs() <= lsb, "{c:?}: {v} → {r:?}");
+                assert_ne!(r.status, Status::Fault);
+                let back = c.value_unclamped(c.current_ma(c.code(c.transmitter_ma(v))));
+                assert!(
+                    (back - v).abs() <= lsb / 2.0 + 1e-5 * v.abs(),
+                    "{v} → {back}"
+                );
+            }
+        }
+    }
+
+    /// NE 43 through the shared model: a healthy transmitter saturates inside the measuring
+    /// range and never reads as a fault, however far the process leaves the span; a current
+    /// forced outside the fault bounds (a broken wire, a short) does, within one code.
+    #[test]
+    fn ne43_edges_through_the_shared_transmitter() {
+        let c = LoopConfig::typical(0.0, 10.0);
+        assert_eq!(c.transmitter_ma(-1e6), VALID_LOW_MA);
+        assert_eq!(c.transmitter_ma(1e6), VALID_HIGH_MA);
+        assert!(c.transmitter_ma(f32::NAN).is_nan());
+        for v in [-1e6, -3.0, -0.125, 10.3125, 12.0, 1e6] {
+            let mut a = AnalogInput::new(c).unwrap();
+            let r = a.sample(c.code(c.transmitter_ma(v)));
+            assert_eq!(r.status, Status::OutOfRange, "{v}");
+            assert_eq!(r.value, v.clamp(0.0, 10.0), "{v}");
+        }
+        let lsb = c.current_ma(1);
+        for (ma, fault) in [
+            (FAULT_LOW_MA, false),
+            (FAULT_LOW_MA - 2.0 * lsb, true),
+            (FAULT_HIGH_MA, false),
+            (FAULT_HIGH_MA + 2.0 * lsb, true),
+            (2.0, true),
+        ] {
+            let mut a = AnalogInput::new(c).unwrap();
+            assert_eq!(
+                a.sample(c.code(ma)).status == Status::Fault,
+                fault,
+                "{ma} mA"
+            );
+        }
+    }
+
+    #[test]
+    fn noise_has_unit_variance_and_is_bounded() {
+        let mut rng = SplitMix64::new(5);
+        let n = 100_000;
+        let xs: Vec<f32> = (0..n).map(|_| noise(&mut rng)).collect();
+        let mean = xs.iter().sum::<f32>() / n as f32;
+        let var = xs.iter().map(|x| (x - mean) * (x - mean)).sum::<f32>() / n as f32;
+        assert!(
+            mean.abs() < 0.01 && (var - 1.0).abs() < 0.02,
+            "{mean} {var}"
+        );
+        assert!(xs.iter().all(|x| x.abs() <= 12f32.sqrt()));
     }
 
     #[test]

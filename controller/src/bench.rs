@@ -5,8 +5,9 @@
 //! the transmitters add a first-order lag (pressure 20 ms, flow 40 ms, as `pumpbench
 //! bench-data`), noise (3 mm of water, 0.02 l/s, 1 σ) and the 4-20 mA loop's saturation at
 //! 3.8 / 20.5 mA (NAMUR NE 43 measuring range); the ADC quantises the shunt voltage to its
-//! bits. The controller therefore reads raw ADC codes through the same scaling and fault
-//! checks as on a board. A loop current can be forced (a broken wire, a short) to exercise
+//! bits. The transmitters, the ADC and the noise are [`crate::analog`]'s model, the one
+//! `pumpbench bench-data` uses too. The controller therefore reads raw ADC codes through the
+//! same scaling and fault checks as on a board. A loop current can be forced (a broken wire, a short) to exercise
 //! the fault path.
 //!
 //! Its drive limits the speed as real drives do (a maximum speed parameter): above
@@ -15,10 +16,10 @@
 //! instead of running away. The controller does not rely on it: its own overspeed
 //! protection ([`crate::protect`]) trips well below the drive's default limit.
 //!
-//! The noise is the sum of four uniform draws (SplitMix64), scaled to unit variance: bounded
-//! (±3.46 σ), cheap on an MCU without `log`/`cos`, and the same sequence on host and target.
+//! The noise is [`crate::analog::noise`]: the sum of four uniform draws (SplitMix64), scaled
+//! to unit variance.
 
-use crate::analog::{LoopConfig, VALID_HIGH_MA, VALID_LOW_MA};
+use crate::analog::{noise, LoopConfig, FLOW_LOOP, PRESSURE_LOOP};
 use crate::control::{
     Commands, Config, Controller, Error, Inputs, NarmaxModel, Outputs, VfdStatus,
 };
@@ -63,8 +64,8 @@ pub struct VirtualBenchConfig {
 pub const DRIVE_SPEED_LIMIT_BAND_RPM: f32 = 50.0;
 
 impl VirtualBenchConfig {
-    /// J +5 %, load torque +2 %, valve k2 +2 %; transmitters 0..10 mca and 0..30 l/s on
-    /// [`LoopConfig::typical`] loops, lags 20 / 40 ms, noise 3 mm / 0.02 l/s; the drive's
+    /// J +5 %, load torque +2 %, valve k2 +2 %; the bench's transmitters ([`PRESSURE_LOOP`]
+    /// 0..10 mca, [`FLOW_LOOP`] 0..30 l/s), lags 20 / 40 ms, noise 3 mm / 0.02 l/s; the drive's
     /// speed limit at 2 100 rpm (120 % of the motor's nominal 1 750).
     pub const fn default_offsets(seed: u64) -> Self {
         Self {
@@ -75,8 +76,8 @@ impl VirtualBenchConfig {
             flow_lag_s: 0.04,
             pressure_noise_mca: 0.003,
             flow_noise_lps: 0.02,
-            pressure_loop: LoopConfig::typical(0.0, 10.0),
-            flow_loop: LoopConfig::typical(0.0, 30.0),
+            pressure_loop: PRESSURE_LOOP,
+            flow_loop: FLOW_LOOP,
             seed,
             drive_speed_limit_rpm: 2100.0,
         }
@@ -205,38 +206,20 @@ impl VirtualBench {
         self.bench.signals(&self.state)
     }
 
-    /// Unit-variance noise, bounded to ±√12 (sum of four uniforms).
-    fn noise(&mut self) -> f32 {
-        let mut s = 0.0f32;
-        for _ in 0..4 {
-            s += (self.rng.next_u64() >> 40) as f32 / (1u64 << 24) as f32;
-        }
-        (s - 2.0) * 1.732_050_8
-    }
-
+    /// The ADC code of a transmitter on `loop_` reading `value`, or driving `forced_ma`.
     fn code(loop_: &LoopConfig, value: f32, forced_ma: Option<f32>) -> u16 {
-        let ma = forced_ma.unwrap_or_else(|| {
-            let span = loop_.value_at_20ma - loop_.value_at_4ma;
-            (4.0 + 16.0 * (value - loop_.value_at_4ma) / span).clamp(VALID_LOW_MA, VALID_HIGH_MA)
-        });
-        let full = ((1u32 << loop_.adc_bits) - 1) as f32;
-        let code = ma * 1e-3 * loop_.shunt_ohm / loop_.adc_ref_v * full + 0.5;
-        if code.is_nan() {
-            0
-        } else {
-            code.clamp(0.0, full) as u16
-        }
+        loop_.code(forced_ma.unwrap_or_else(|| loop_.transmitter_ma(value)))
     }
 
     /// The pressure transmitter's ADC code now (one noise draw).
     pub fn pressure_code(&mut self) -> u16 {
-        let v = self.pressure_seen + self.noise() * self.config.pressure_noise_mca;
+        let v = self.pressure_seen + noise(&mut self.rng) * self.config.pressure_noise_mca;
         Self::code(&self.config.pressure_loop, v, self.force_pressure_ma)
     }
 
     /// The flow transmitter's ADC code now (one noise draw).
     pub fn flow_code(&mut self) -> u16 {
-        let v = self.flow_seen + self.noise() * self.config.flow_noise_lps;
+        let v = self.flow_seen + noise(&mut self.rng) * self.config.flow_noise_lps;
         Self::code(&self.config.flow_loop, v, self.force_flow_ma)
     }
 }

@@ -9,9 +9,9 @@
 //! 0. the protections ([`crate::protect`]): the speed (the drive's last reading, else the
 //!    observer's) against the overspeed limit, a SCADA write of mode 0 acknowledging the
 //!    latched alarms and the trip, and the trip itself: while tripped (or not yet restarted
-//!    after a trip) the mode is taken as stop, whatever the mode register says;
-//! 1. the torque requested by the mode (holding register 1: stop → 0 %, manual → the
-//!    setpoint, profile → the paper's pulses, restarted from its seed on entry);
+//!    after a trip) the mode is taken as stop, whatever the commanded mode;
+//! 1. the torque requested by the mode ([`Mode`]: stop → 0 %, manual → the setpoint in %,
+//!    profile → the paper's pulses, restarted from its seed on entry);
 //! 2. the applied reference: the requested one, or the safe value 0 % while the VFD link
 //!    alarm stands (the reference cannot be delivered, see [`crate::vfd`]); it goes to the
 //!    torque output (DAC / PWM) and, as requested, to the VFD link;
@@ -31,9 +31,9 @@
 //! Nothing here touches hardware, so the core runs in host tests and in the host replay of
 //! the QEMU run, bit for bit.
 
-use crate::analog::{AnalogInput, LoopConfig, Status as InputStatus};
+use crate::analog::{AnalogInput, LoopConfig, Status as InputStatus, FLOW_LOOP, PRESSURE_LOOP};
 use crate::protect::{Protection, ProtectionConfig};
-use crate::scada::{Arithmetic, Mode, Published, Status};
+use crate::types::{Arithmetic, Mode, Published, Status};
 use crate::vfd::{VfdMap, VfdReadings};
 use model_core::excitation::McuPulses;
 use model_core::monitor::{Monitor, MonitorConfig, MonitorInputs};
@@ -86,8 +86,8 @@ pub struct Config {
     pub profile_seed: u64,
     /// Mode at start-up.
     pub initial_mode: Mode,
-    /// Torque setpoint at start-up, 0.01 % (0..=10000).
-    pub initial_setpoint: u16,
+    /// Torque setpoint at start-up, % (0..=100; the SCADA register holds it to 0.01 %).
+    pub initial_setpoint_pct: f32,
     /// NARMAX arithmetic at start-up.
     pub initial_arithmetic: Arithmetic,
     /// The board has a virtual bench: SCADA holding registers 3 (valve) and 4 (fault
@@ -98,18 +98,18 @@ pub struct Config {
 }
 
 impl Config {
-    /// Pressure 0..10 mca and flow 0..30 l/s on [`LoopConfig::typical`] loops, the
-    /// [`VfdMap::example_16384`] drive, SCADA unit 1, profile seed 1, stopped, NARMAX in f32,
-    /// no virtual bench.
+    /// The bench's transmitters (pressure 0..10 mca, flow 0..30 l/s: [`PRESSURE_LOOP`],
+    /// [`FLOW_LOOP`]), the [`VfdMap::example_16384`] drive, SCADA unit 1, profile seed 1,
+    /// stopped, NARMAX in f32, no virtual bench.
     pub const fn bench() -> Self {
         Self {
-            pressure_loop: LoopConfig::typical(0.0, 10.0),
-            flow_loop: LoopConfig::typical(0.0, 30.0),
+            pressure_loop: PRESSURE_LOOP,
+            flow_loop: FLOW_LOOP,
             vfd: VfdMap::example_16384(),
             scada_unit: 1,
             profile_seed: 1,
             initial_mode: Mode::Stop,
-            initial_setpoint: 0,
+            initial_setpoint_pct: 0.0,
             initial_arithmetic: Arithmetic::F32,
             virtual_bench: false,
             protection: ProtectionConfig::DEFAULT,
@@ -146,7 +146,7 @@ impl core::fmt::Display for Error {
 #[derive(Debug, Clone)]
 pub struct NarmaxModel<const F: usize, const H: usize> {
     float: &'static NarxF32<F, H>,
-    fixed: &'static NarxQ15<F, H>,
+    q15: &'static NarxQ15<F, H>,
     st: NarxF32State<F>,
     st_q: NarxQ15State<F>,
     period_ms: u32,
@@ -155,11 +155,11 @@ pub struct NarmaxModel<const F: usize, const H: usize> {
 
 impl<const F: usize, const H: usize> NarmaxModel<F, H> {
     /// The model sampled every `period_ms` ms (1..=[`MAX_PERIOD_MS`], the firmware's rule for a
-    /// model's period, `model_core::narmax::mcu::firmware_period_ms`); `float` and `fixed` are the same model's two passes (both made by
+    /// model's period, `model_core::narmax::mcu::firmware_period_ms`); `float` and `q15` are the same model's two passes (both made by
     /// `pumpbench export`).
     pub fn new(
         float: &'static NarxF32<F, H>,
-        fixed: &'static NarxQ15<F, H>,
+        q15: &'static NarxQ15<F, H>,
         period_ms: u32,
     ) -> Result<Self, Error> {
         if !(1..=MAX_PERIOD_MS).contains(&period_ms) {
@@ -168,9 +168,9 @@ impl<const F: usize, const H: usize> NarmaxModel<F, H> {
         let (u0, y0) = (0.0, float.output_mean());
         Ok(Self {
             st: float.state_at(u0, y0),
-            st_q: fixed.state_at(u0, y0),
+            st_q: q15.state_at(u0, y0),
             float,
-            fixed,
+            q15,
             period_ms,
             last: y0,
         })
@@ -185,7 +185,7 @@ impl<const F: usize, const H: usize> NarmaxModel<F, H> {
     fn reseed(&mut self, arith: Arithmetic, u: f32, y: f32) {
         match arith {
             Arithmetic::F32 => self.st = self.float.state_at(u, y),
-            Arithmetic::Fixed => self.st_q = self.fixed.state_at(u, y),
+            Arithmetic::Q15 => self.st_q = self.q15.state_at(u, y),
         }
         self.last = y;
     }
@@ -194,7 +194,7 @@ impl<const F: usize, const H: usize> NarmaxModel<F, H> {
     fn step(&mut self, arith: Arithmetic, u: f32, measured: Option<f32>) -> NarmaxOutput<f32> {
         let out = match arith {
             Arithmetic::F32 => self.float.step(&mut self.st, u, measured),
-            Arithmetic::Fixed => self.fixed.step(&mut self.st_q, u, measured),
+            Arithmetic::Q15 => self.q15.step(&mut self.st_q, u, measured),
         };
         self.last = out.y;
         out
@@ -210,7 +210,7 @@ pub struct LogLine {
     pub mode: Mode,
     /// NARMAX arithmetic.
     pub arithmetic: Arithmetic,
-    /// What the SCADA registers hold.
+    /// What the controller publishes.
     pub values: Published,
 }
 
@@ -264,14 +264,15 @@ impl defmt::Format for LogLine {
     }
 }
 
-/// What the SCADA holding registers ask of the controller (see [`crate::scada`]).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// What the SCADA holding registers ask of the controller, in the core's units (decoded by
+/// [`crate::scada::ScadaSlave::commands`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Commands {
     /// Mode.
     pub mode: Mode,
-    /// Torque setpoint, 0.01 % (0..=10000).
-    pub setpoint: u16,
+    /// Torque setpoint, % (0..=100, finite; the torque requested in manual mode).
+    pub setpoint_pct: f32,
     /// NARMAX arithmetic.
     pub arithmetic: Arithmetic,
     /// Virtual bench valve, 0.1 % of nominal k2 (500..=2000).
@@ -530,7 +531,7 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             }
             Mode::Manual => {
                 self.profile = None;
-                f32::from(c.setpoint) / 100.0
+                c.setpoint_pct
             }
             Mode::Profile => {
                 let seed = self.profile_seed;

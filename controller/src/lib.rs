@@ -4,7 +4,9 @@
 //! - [`analog`]: the 4-20 mA inputs with NAMUR NE 43 faults;
 //! - [`modbus`]: the Modbus RTU layer: frames, CRC, the RTU gate, content framing and the one
 //!   slave engine that serves a register map;
-//! - [`scada`]: the SCADA slave's register map;
+//! - [`types`]: the core's own types (mode, arithmetic, status, published values);
+//! - [`scada`]: the SCADA slave's register map, and its conversions to and from the core's
+//!   types;
 //! - [`vfd`]: the VFD Modbus RTU master; [`vfdsim`]: a simulated drive (its register map);
 //! - [`rtu`]: RTU framing by silence and an RS-485 port on the embedded-hal traits;
 //! - [`control`]: the real-time core, stepped every 1 ms, that ties the inputs to the
@@ -24,5 +26,6 @@ pub mod modbus;
 pub mod protect;
 pub mod rtu;
 pub mod scada;
+pub mod types;
 pub mod vfd;
 pub mod vfdsim;

@@ -12,7 +12,8 @@
 
 use crate::control::{Commands, Config, Error, VfdStatus};
 use crate::modbus::Frame;
-use crate::scada::{Published, ScadaSlave, INPUT_REGISTERS};
+use crate::scada::{input_registers, setpoint_register, ScadaSlave, INPUT_REGISTERS};
+use crate::types::Published;
 use crate::vfd::{VfdMap, VfdMaster};
 
 /// The SCADA server's state: holding registers in, input registers out.
@@ -23,15 +24,14 @@ pub struct ScadaLink {
 }
 
 impl ScadaLink {
-    /// The server at `config.scada_unit`, holding the start-up mode, setpoint and arithmetic;
-    /// with holding registers 3 and 4 if `config.virtual_bench`.
+    /// The server at `config.scada_unit`, holding the start-up mode, setpoint (rounded to the
+    /// register's 0.01 %; refused outside 0..=100 %) and arithmetic; with holding registers 3
+    /// and 4 if `config.virtual_bench`.
     pub fn new(config: &Config) -> Result<Self, Error> {
         let mut slave = ScadaSlave::new(config.scada_unit).ok_or(Error::Config("SCADA unit"))?;
-        if config.initial_setpoint > crate::scada::SETPOINT_MAX {
-            return Err(Error::Config("initial setpoint above 10000"));
-        }
+        slave.setpoint = setpoint_register(config.initial_setpoint_pct)
+            .ok_or(Error::Config("initial setpoint outside 0..=100 %"))?;
         slave.mode = config.initial_mode;
-        slave.setpoint = config.initial_setpoint;
         slave.arithmetic = config.initial_arithmetic;
         if !config.protection.is_valid() {
             return Err(Error::Config("protection settings out of range"));
@@ -42,27 +42,18 @@ impl ScadaLink {
         }
         Ok(Self {
             slave,
-            inputs: Published::default().registers(),
+            inputs: input_registers(&Published::default()),
         })
     }
 
     /// Takes the values the core published (the input registers from now on).
     pub fn publish(&mut self, values: &Published) {
-        self.inputs = values.registers();
+        self.inputs = input_registers(values);
     }
 
-    /// What the holding registers ask of the core.
+    /// What the holding registers ask of the core ([`ScadaSlave::commands`]).
     pub fn commands(&self) -> Commands {
-        let s = &self.slave;
-        Commands {
-            mode: s.mode,
-            setpoint: s.setpoint,
-            arithmetic: s.arithmetic,
-            valve_permille: s.valve_permille,
-            faults: s.faults,
-            stop_writes: s.stop_writes,
-            protection: s.protection,
-        }
+        self.slave.commands()
     }
 
     /// The slave (holding registers).

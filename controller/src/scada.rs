@@ -1,4 +1,7 @@
-//! The SCADA side: a Modbus RTU slave with the controller's register map.
+//! The SCADA side: a Modbus RTU slave with the controller's register map, and the
+//! conversions between its registers and the core's types ([`crate::types`], the core's
+//! [`Commands`]): the setpoint's 0.01 %, the mode and arithmetic codes, the published values'
+//! scales. The core sees none of it.
 //!
 //! | input register (FC 04) | meaning | unit |
 //! |---|---|---|
@@ -33,7 +36,7 @@
 //! |---|---|---|
 //! | 0 | torque setpoint, 0.01 % | 0..=10000 |
 //! | 1 | mode: 0 stop, 1 manual setpoint, 2 built-in excitation profile; writing 0 also acknowledges the latched alarms whose cause has gone | 0..=2 |
-//! | 2 | NARMAX arithmetic: 0 f32, 1 fixed point | 0..=1 |
+//! | 2 | NARMAX arithmetic: 0 f32, 1 Q15 fixed point | 0..=1 |
 //! | 3 | virtual bench only: its valve, k2 in 0.1 % of nominal (1000 = nominal) | 500..=2000 |
 //! | 4 | virtual bench only: fault injection bits: 0 dry run, 1 pressure transmitter at 2 mA, 2 flow transmitter at 2 mA, 3 VFD link cut | 0..=15 |
 //! | 5 | overspeed limit, rpm (default 1925: 110 % of the nominal 1 750) | 100..=4000 |
@@ -54,8 +57,10 @@
 //! The register map is served by the crate's one Modbus slave engine ([`crate::modbus::serve`]),
 //! which gives the silences and the exceptions above (and works around rmodbus's defects).
 
+use crate::control::Commands;
 use crate::modbus::{serve, signed_register, unsigned_register, Exception, Frame, RegisterMap};
 use crate::protect::{ProtectionConfig, NO_FLOW_TRIP_RANGE_S, OVERSPEED_RANGE_RPM, TRIP_ALL};
+use crate::types::{Arithmetic, Mode, Published};
 
 /// Input registers.
 pub const INPUT_REGISTERS: usize = 26;
@@ -78,178 +83,56 @@ pub const FAULT_VFD_LINK: u16 = 1 << 3;
 /// Largest torque setpoint, 0.01 %.
 pub const SETPOINT_MAX: u16 = 10_000;
 
-/// Operating mode (holding register 1).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum Mode {
-    /// Torque reference 0.
-    #[default]
-    Stop = 0,
-    /// Torque reference = the setpoint.
-    Manual = 1,
-    /// The built-in excitation profile (the paper's pulses).
-    Profile = 2,
-}
-
-/// Arithmetic of the NARMAX pass (holding register 2).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum Arithmetic {
-    /// f32 forward pass.
-    #[default]
-    F32 = 0,
-    /// Fixed point (the Q15 pass, `NarxQ15`).
-    Fixed = 1,
-}
-
-impl Arithmetic {
-    /// The name used in logs and options: `f32` or `q15`.
-    pub fn name(self) -> &'static str {
-        match self {
-            Arithmetic::F32 => "f32",
-            Arithmetic::Fixed => "q15",
-        }
-    }
-
-    /// The arithmetic of a [`Self::name`].
-    pub fn from_name(name: &str) -> Option<Self> {
-        match name {
-            "f32" => Some(Arithmetic::F32),
-            "q15" => Some(Arithmetic::Fixed),
-            _ => None,
-        }
+/// Holding register 1 for a mode: 0 stop, 1 manual, 2 profile.
+pub fn mode_register(mode: Mode) -> u16 {
+    match mode {
+        Mode::Stop => 0,
+        Mode::Manual => 1,
+        Mode::Profile => 2,
     }
 }
 
-impl Mode {
-    /// The name used in logs: `stop`, `manual` or `profile`.
-    pub fn name(self) -> &'static str {
-        match self {
-            Mode::Stop => "stop",
-            Mode::Manual => "manual",
-            Mode::Profile => "profile",
-        }
-    }
-
-    fn from_register(v: u16) -> Option<Self> {
-        match v {
-            0 => Some(Mode::Stop),
-            1 => Some(Mode::Manual),
-            2 => Some(Mode::Profile),
-            _ => None,
-        }
+/// The mode of holding register 1; `None` for a value outside 0..=2.
+pub fn mode_from_register(v: u16) -> Option<Mode> {
+    match v {
+        0 => Some(Mode::Stop),
+        1 => Some(Mode::Manual),
+        2 => Some(Mode::Profile),
+        _ => None,
     }
 }
 
-/// Status bits of input register 0.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct Status {
-    /// Bit 0: the drive is commanded to run.
-    pub running: bool,
-    /// Bit 1: any alarm.
-    pub any_alarm: bool,
-    /// Bit 2: a model runs outside its fitted/training range.
-    pub extrapolating: bool,
-    /// Bit 3: the VFD link delivers the torque reference (no link alarm).
-    pub vfd_link_ok: bool,
-    /// Bit 4: pressure transmitter fault (NAMUR NE 43).
-    pub pressure_fault: bool,
-    /// Bit 5: flow transmitter fault.
-    pub flow_fault: bool,
-    /// Bit 6: the drive's readings are invalid (its reads fail, or the link is down): the
-    /// controller is blind to the drive, and input registers 14-16 read 0.
-    pub vfd_readings_invalid: bool,
-    /// Bit 7: tripped: a protection holds the torque at 0 % ([`crate::protect`]).
-    pub tripped: bool,
-}
-
-impl Status {
-    /// The register value.
-    pub fn bits(&self) -> u16 {
-        // Shifts written out: the fold over an array was a call of ≈ 68 instructions in
-        // every 1 ms step on the M4.
-        u16::from(self.running)
-            | u16::from(self.any_alarm) << 1
-            | u16::from(self.extrapolating) << 2
-            | u16::from(self.vfd_link_ok) << 3
-            | u16::from(self.pressure_fault) << 4
-            | u16::from(self.flow_fault) << 5
-            | u16::from(self.vfd_readings_invalid) << 6
-            | u16::from(self.tripped) << 7
-    }
-
-    /// The bits back as flags (bits this struct has no flag for are ignored).
-    pub fn from_bits(bits: u16) -> Self {
-        let b = |i: u32| bits & (1 << i) != 0;
-        Self {
-            running: b(0),
-            any_alarm: b(1),
-            extrapolating: b(2),
-            vfd_link_ok: b(3),
-            pressure_fault: b(4),
-            flow_fault: b(5),
-            vfd_readings_invalid: b(6),
-            tripped: b(7),
-        }
+/// Holding register 2 for an arithmetic: 0 f32, 1 Q15.
+pub fn arithmetic_register(arithmetic: Arithmetic) -> u16 {
+    match arithmetic {
+        Arithmetic::F32 => 0,
+        Arithmetic::Q15 => 1,
     }
 }
 
-/// What the controller publishes, in engineering units (converted and clamped here).
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct Published {
-    /// Status bits, [`Status::bits`] (input register 0 without bit 8, which the registers
-    /// add). A word, not the flags: the struct stays free of padding, so the 1 ms step copies
-    /// it by words (with a padding byte at its end LLVM copied it byte by byte, ≈ 370
-    /// instructions per step on the M4).
-    pub status: u16,
-    /// Applied torque reference, %.
-    pub torque_pct: f32,
-    /// Measured pressure, mca.
-    pub pressure_mca: f32,
-    /// Measured flow, l/s.
-    pub flow_lps: f32,
-    /// White-box predicted pressure, mca.
-    pub whitebox_pressure_mca: f32,
-    /// White-box predicted flow, l/s.
-    pub whitebox_flow_lps: f32,
-    /// White-box speed, rpm.
-    pub whitebox_speed_rpm: f32,
-    /// NARMAX predicted pressure, mca.
-    pub narmax_pressure_mca: f32,
-    /// NARMAX predicted flow, l/s.
-    pub narmax_flow_lps: f32,
-    /// Sample counter.
-    pub sample: u16,
-    /// White-box pressure residual, mca.
-    pub whitebox_pressure_residual_mca: f32,
-    /// White-box flow residual, l/s.
-    pub whitebox_flow_residual_lps: f32,
-    /// NARMAX pressure residual, mca.
-    pub narmax_pressure_residual_mca: f32,
-    /// NARMAX flow residual, l/s.
-    pub narmax_flow_residual_lps: f32,
-    /// VFD actual speed, rpm.
-    pub vfd_speed_rpm: f32,
-    /// VFD actual torque, %.
-    pub vfd_torque_pct: f32,
-    /// VFD status word.
-    pub vfd_status: u16,
-    /// Uptime, s.
-    pub uptime_s: u16,
-    /// Observer speed, rpm.
-    pub observer_speed_rpm: f32,
-    /// Observer flow, l/s.
-    pub observer_flow_lps: f32,
-    /// Observer valve coefficient k2.
-    pub observer_valve_k2: f32,
-    /// Alarm bits (see the module table).
-    pub alarms: u16,
-    /// Observer flow standard deviation, l/s.
-    pub observer_flow_sd_lps: f32,
-    /// The alarm bits that tripped the controller (0: not tripped).
-    pub trip_causes: u16,
+/// The arithmetic of holding register 2; `None` for a value outside 0..=1.
+pub fn arithmetic_from_register(v: u16) -> Option<Arithmetic> {
+    match v {
+        0 => Some(Arithmetic::F32),
+        1 => Some(Arithmetic::Q15),
+        _ => None,
+    }
+}
+
+/// The torque setpoint of holding register 0 (0.01 %), in % (register 0..=10000: 0..=100 %;
+/// the register's check refuses more).
+pub fn setpoint_pct(register: u16) -> f32 {
+    // A division, as the core always had it: 5000 → 50.0 exactly, 3333 → 33.33 rounded once.
+    f32::from(register) / 100.0
+}
+
+/// Holding register 0 (0.01 %) for a torque setpoint in %, rounded to the register's step;
+/// `None` unless `pct` is within 0..=100 (NaN included).
+pub fn setpoint_register(pct: f32) -> Option<u16> {
+    // 100.0 · 100 is exact; the rounding is half away from 0 and never leaves 0..=10000.
+    (0.0..=100.0)
+        .contains(&pct)
+        .then_some((pct * 100.0 + 0.5) as u16)
 }
 
 /// Scales values into registers and remembers whether one did not fit (status bit 8).
@@ -274,45 +157,77 @@ impl Fit {
     }
 }
 
-impl Published {
-    /// The input registers. A value beyond its register's range reads as the range's end,
-    /// and sets status bit 8 (saturated).
-    pub fn registers(&self) -> [u16; INPUT_REGISTERS] {
-        let mut f = Fit::default();
-        let u = u16::MAX;
-        let mut r = [
-            0,
-            f.unsigned(self.torque_pct, 100.0, SETPOINT_MAX),
-            f.signed(self.pressure_mca, 1000.0),
-            f.unsigned(self.flow_lps, 100.0, u),
-            f.signed(self.whitebox_pressure_mca, 1000.0),
-            f.unsigned(self.whitebox_flow_lps, 100.0, u),
-            f.unsigned(self.whitebox_speed_rpm, 10.0, u),
-            f.signed(self.narmax_pressure_mca, 1000.0),
-            f.unsigned(self.narmax_flow_lps, 100.0, u),
-            self.sample,
-            f.signed(self.whitebox_pressure_residual_mca, 1000.0),
-            f.signed(self.whitebox_flow_residual_lps, 100.0),
-            f.signed(self.narmax_pressure_residual_mca, 1000.0),
-            f.signed(self.narmax_flow_residual_lps, 100.0),
-            f.signed(self.vfd_speed_rpm, 10.0),
-            f.signed(self.vfd_torque_pct, 100.0),
-            self.vfd_status,
-            self.uptime_s,
-            f.unsigned(self.observer_speed_rpm, 10.0, u),
-            f.unsigned(self.observer_flow_lps, 100.0, u),
-            f.unsigned(self.observer_valve_k2, 1e5, u),
-            self.alarms,
-            f.unsigned(self.observer_flow_sd_lps, 100.0, u),
-            self.trip_causes,
-            0,
-            0,
-        ];
-        // The wide twins of 14 and 20: a saturated twin still reads the wide value.
-        r[24] = signed_register(self.vfd_speed_rpm, 1.0);
-        r[25] = unsigned_register(self.observer_valve_k2, 1e4);
-        r[0] = self.status | (u16::from(f.saturated) << 8);
-        r
+/// The input registers of the published values (the table in the module docs). A value
+/// beyond its register's range reads as the range's end, and sets status bit 8 (saturated).
+pub fn input_registers(p: &Published) -> [u16; INPUT_REGISTERS] {
+    let mut f = Fit::default();
+    let u = u16::MAX;
+    let mut r = [
+        0,
+        f.unsigned(p.torque_pct, 100.0, SETPOINT_MAX),
+        f.signed(p.pressure_mca, 1000.0),
+        f.unsigned(p.flow_lps, 100.0, u),
+        f.signed(p.whitebox_pressure_mca, 1000.0),
+        f.unsigned(p.whitebox_flow_lps, 100.0, u),
+        f.unsigned(p.whitebox_speed_rpm, 10.0, u),
+        f.signed(p.narmax_pressure_mca, 1000.0),
+        f.unsigned(p.narmax_flow_lps, 100.0, u),
+        p.sample,
+        f.signed(p.whitebox_pressure_residual_mca, 1000.0),
+        f.signed(p.whitebox_flow_residual_lps, 100.0),
+        f.signed(p.narmax_pressure_residual_mca, 1000.0),
+        f.signed(p.narmax_flow_residual_lps, 100.0),
+        f.signed(p.vfd_speed_rpm, 10.0),
+        f.signed(p.vfd_torque_pct, 100.0),
+        p.vfd_status,
+        p.uptime_s,
+        f.unsigned(p.observer_speed_rpm, 10.0, u),
+        f.unsigned(p.observer_flow_lps, 100.0, u),
+        f.unsigned(p.observer_valve_k2, 1e5, u),
+        p.alarms,
+        f.unsigned(p.observer_flow_sd_lps, 100.0, u),
+        p.trip_causes,
+        0,
+        0,
+    ];
+    // The wide twins of 14 and 20: a saturated twin still reads the wide value.
+    r[24] = signed_register(p.vfd_speed_rpm, 1.0);
+    r[25] = unsigned_register(p.observer_valve_k2, 1e4);
+    r[0] = p.status | (u16::from(f.saturated) << 8);
+    r
+}
+
+/// The published values back from input registers 0..=23, as a SCADA client reads them:
+/// each within half its register's step of the value published, a saturated one at its
+/// range's end (status bit 8, not kept here, says so; the wide twins 24 and 25 are not read).
+pub fn published_from_registers(r: &[u16; INPUT_REGISTERS]) -> Published {
+    let unsigned = |i: usize, scale: f32| f32::from(r[i]) / scale;
+    let signed = |i: usize, scale: f32| f32::from(r[i] as i16) / scale;
+    Published {
+        status: r[0] & 0xFF,
+        torque_pct: unsigned(1, 100.0),
+        pressure_mca: signed(2, 1000.0),
+        flow_lps: unsigned(3, 100.0),
+        whitebox_pressure_mca: signed(4, 1000.0),
+        whitebox_flow_lps: unsigned(5, 100.0),
+        whitebox_speed_rpm: unsigned(6, 10.0),
+        narmax_pressure_mca: signed(7, 1000.0),
+        narmax_flow_lps: unsigned(8, 100.0),
+        sample: r[9],
+        whitebox_pressure_residual_mca: signed(10, 1000.0),
+        whitebox_flow_residual_lps: signed(11, 100.0),
+        narmax_pressure_residual_mca: signed(12, 1000.0),
+        narmax_flow_residual_lps: signed(13, 100.0),
+        vfd_speed_rpm: signed(14, 10.0),
+        vfd_torque_pct: signed(15, 100.0),
+        vfd_status: r[16],
+        uptime_s: r[17],
+        observer_speed_rpm: unsigned(18, 10.0),
+        observer_flow_lps: unsigned(19, 100.0),
+        observer_valve_k2: unsigned(20, 1e5),
+        alarms: r[21],
+        observer_flow_sd_lps: unsigned(22, 100.0),
+        trip_causes: r[23],
     }
 }
 
@@ -364,14 +279,27 @@ impl ScadaSlave {
     pub fn holding(&self) -> [u16; HOLDING_REGISTERS] {
         [
             self.setpoint,
-            self.mode as u16,
-            self.arithmetic as u16,
+            mode_register(self.mode),
+            arithmetic_register(self.arithmetic),
             self.valve_permille,
             self.faults,
             self.protection.overspeed_rpm,
             self.protection.trip_on,
             self.protection.no_flow_trip_s,
         ]
+    }
+
+    /// What the holding registers ask of the core, in its units (the setpoint in %).
+    pub fn commands(&self) -> Commands {
+        Commands {
+            mode: self.mode,
+            setpoint_pct: setpoint_pct(self.setpoint),
+            arithmetic: self.arithmetic,
+            valve_permille: self.valve_permille,
+            faults: self.faults,
+            stop_writes: self.stop_writes,
+            protection: self.protection,
+        }
     }
 
     /// The holding registers `start..start + n` all exist on this board.
@@ -415,17 +343,14 @@ impl ScadaSlave {
             match start + k {
                 0 if v <= SETPOINT_MAX => next.setpoint = v,
                 1 => {
-                    next.mode = Mode::from_register(v).ok_or(Exception::IllegalDataValue)?;
+                    next.mode = mode_from_register(v).ok_or(Exception::IllegalDataValue)?;
                     if next.mode == Mode::Stop {
                         next.stop_writes = next.stop_writes.wrapping_add(1);
                     }
                 }
                 2 => {
-                    next.arithmetic = match v {
-                        0 => Arithmetic::F32,
-                        1 => Arithmetic::Fixed,
-                        _ => return Err(Exception::IllegalDataValue),
-                    }
+                    next.arithmetic =
+                        arithmetic_from_register(v).ok_or(Exception::IllegalDataValue)?
                 }
                 3 if VALVE_RANGE_PERMILLE.contains(&v) => next.valve_permille = v,
                 4 if v <= 15 => next.faults = v,
@@ -477,6 +402,7 @@ fn read_words(table: &[u16], address: u16, out: &mut [u16]) -> Result<(), Except
 mod tests {
     use super::*;
     use crate::modbus::crc16;
+    use crate::types::Status;
 
     fn frame(body: &[u8]) -> Vec<u8> {
         let mut f = body.to_vec();
@@ -515,7 +441,7 @@ mod tests {
         let r = ask(&mut s, &frame(&[1, 3, 0, 0, 0, 2])).unwrap();
         assert_eq!(&r[..7], &[1, 3, 4, 0x0F, 0xA0, 0, 1]);
         ask(&mut s, &frame(&[1, 6, 0, 2, 0, 1])).unwrap();
-        assert_eq!(s.arithmetic, Arithmetic::Fixed);
+        assert_eq!(s.arithmetic, Arithmetic::Q15);
         let r = ask(&mut s, &frame(&[1, 4, 0, 17, 0, 1])).unwrap();
         assert_eq!(&r[..5], &[1, 4, 2, 0, 117]);
         let r = ask(&mut s, &frame(&[1, 4, 0, 22, 0, 1])).unwrap();
@@ -606,29 +532,29 @@ mod tests {
             observer_valve_k2: 0.1082,
             ..Published::default()
         };
-        let r = ok.registers();
+        let r = input_registers(&ok);
         assert_eq!(r[0] & 1 << 8, 0);
         assert_eq!((r[14], r[24], r[20], r[25]), (17500, 1750, 10820, 1082));
         let fast = Published {
             vfd_speed_rpm: 5123.4,
             ..ok
         };
-        let r = fast.registers();
+        let r = input_registers(&fast);
         assert_eq!(r[0] & 1 << 8, 1 << 8, "saturated");
         assert_eq!((r[14], r[24]), (32767, 5123));
         let closed = Published {
             observer_valve_k2: 0.9,
             ..ok
         };
-        let r = closed.registers();
+        let r = input_registers(&closed);
         assert_eq!(r[0] & 1 << 8, 1 << 8);
         assert_eq!((r[20], r[25]), (65535, 9000));
         let back = Published {
             vfd_speed_rpm: -3300.0,
             ..ok
         };
-        assert_eq!(back.registers()[0] & 1 << 8, 1 << 8, "negative too");
-        assert_eq!(back.registers()[24] as i16, -3300);
+        assert_eq!(input_registers(&back)[0] & 1 << 8, 1 << 8, "negative too");
+        assert_eq!(input_registers(&back)[24] as i16, -3300);
     }
 
     #[test]
@@ -727,6 +653,130 @@ mod tests {
         assert_eq!(s.setpoint, 7);
     }
 
+    /// The holding registers ↔ the core's types: every valid register value round trips, and
+    /// the wire codes are the table's.
+    #[test]
+    fn holding_registers_round_trip_through_the_core_types() {
+        for v in 0..=u16::MAX {
+            if let Some(m) = mode_from_register(v) {
+                assert_eq!(mode_register(m), v);
+            }
+            if let Some(a) = arithmetic_from_register(v) {
+                assert_eq!(arithmetic_register(a), v);
+            }
+            if v <= SETPOINT_MAX {
+                assert_eq!(setpoint_register(setpoint_pct(v)), Some(v), "{v}");
+            }
+        }
+        assert_eq!(
+            [Mode::Stop, Mode::Manual, Mode::Profile].map(mode_register),
+            [0, 1, 2]
+        );
+        assert_eq!(mode_from_register(3), None);
+        assert_eq!(
+            [Arithmetic::F32, Arithmetic::Q15].map(arithmetic_register),
+            [0, 1]
+        );
+        assert_eq!(arithmetic_from_register(2), None);
+        // The setpoint as the core always read it: register / 100, a division.
+        assert_eq!(setpoint_pct(5000), 50.0);
+        assert_eq!(setpoint_pct(3333).to_bits(), (3333.0f32 / 100.0).to_bits());
+        assert_eq!(setpoint_register(33.334), Some(3333));
+        assert_eq!(setpoint_register(100.0), Some(SETPOINT_MAX));
+        for bad in [-0.01, 100.01, f32::NAN, f32::INFINITY] {
+            assert_eq!(setpoint_register(bad), None, "{bad}");
+        }
+        // The slave hands the core the setpoint in %.
+        let mut s = ScadaSlave::new(1).unwrap();
+        ask(
+            &mut s,
+            &frame(&[1, 16, 0, 0, 0, 3, 6, 0x0D, 0x05, 0, 1, 0, 1]),
+        )
+        .unwrap();
+        let c = s.commands();
+        assert_eq!(
+            (c.setpoint_pct, c.mode, c.arithmetic),
+            (33.33, Mode::Manual, Arithmetic::Q15)
+        );
+    }
+
+    /// The input registers read back within half their step of the values published.
+    #[test]
+    fn input_registers_round_trip_within_half_a_step() {
+        let p = Published {
+            status: Status {
+                running: true,
+                vfd_link_ok: true,
+                tripped: true,
+                ..Status::default()
+            }
+            .bits(),
+            torque_pct: 47.123,
+            pressure_mca: -0.25,
+            flow_lps: 15.776,
+            whitebox_pressure_mca: 2.6604,
+            whitebox_flow_lps: 15.3,
+            whitebox_speed_rpm: 1629.14,
+            narmax_pressure_mca: 2.7,
+            narmax_flow_lps: 15.2,
+            sample: 65535,
+            whitebox_pressure_residual_mca: -0.0125,
+            whitebox_flow_residual_lps: 0.47,
+            narmax_pressure_residual_mca: 0.004,
+            narmax_flow_residual_lps: -0.58,
+            vfd_speed_rpm: -12.34,
+            vfd_torque_pct: 48.0,
+            vfd_status: 0xBEEF,
+            uptime_s: 7,
+            observer_speed_rpm: 1630.0,
+            observer_flow_lps: 15.5,
+            observer_valve_k2: 0.1082,
+            alarms: 0x1FF,
+            observer_flow_sd_lps: 0.3,
+            trip_causes: 0x18,
+        };
+        let r = input_registers(&p);
+        assert_eq!(r[0] & 1 << 8, 0, "nothing saturated");
+        let q = published_from_registers(&r);
+        let fields = |x: &Published| {
+            [
+                (x.torque_pct, 100.0),
+                (x.pressure_mca, 1000.0),
+                (x.flow_lps, 100.0),
+                (x.whitebox_pressure_mca, 1000.0),
+                (x.whitebox_flow_lps, 100.0),
+                (x.whitebox_speed_rpm, 10.0),
+                (x.narmax_pressure_mca, 1000.0),
+                (x.narmax_flow_lps, 100.0),
+                (x.whitebox_pressure_residual_mca, 1000.0),
+                (x.whitebox_flow_residual_lps, 100.0),
+                (x.narmax_pressure_residual_mca, 1000.0),
+                (x.narmax_flow_residual_lps, 100.0),
+                (x.vfd_speed_rpm, 10.0),
+                (x.vfd_torque_pct, 100.0),
+                (x.observer_speed_rpm, 10.0),
+                (x.observer_flow_lps, 100.0),
+                (x.observer_valve_k2, 1e5),
+                (x.observer_flow_sd_lps, 100.0),
+            ]
+        };
+        for (k, ((a, scale), (b, _))) in fields(&p).into_iter().zip(fields(&q)).enumerate() {
+            assert!((a - b).abs() * scale <= 0.5 + 1e-3, "field {k}: {a} → {b}");
+        }
+        let words = |x: &Published| {
+            [
+                x.status,
+                x.sample,
+                x.vfd_status,
+                x.uptime_s,
+                x.alarms,
+                x.trip_causes,
+            ]
+        };
+        assert_eq!(words(&q), words(&p), "the words exactly");
+        assert_eq!(input_registers(&q), r, "and back to the same registers");
+    }
+
     #[test]
     fn registers_are_scaled_clamped_and_finite() {
         let p = Published {
@@ -751,7 +801,7 @@ mod tests {
             uptime_s: 7,
             ..Published::default()
         };
-        let r = p.registers();
+        let r = input_registers(&p);
         assert_eq!(r[0], 0b1_0010_0001, "saturated: 150 % and 1e9 mca");
         assert_eq!(r[1], 10_000);
         assert_eq!(r[2] as i16, -250);

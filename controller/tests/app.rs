@@ -6,7 +6,7 @@ use controller::bench::{VirtualBenchConfig, VirtualBoard, VirtualIo};
 use controller::control::{Config, LogLine, NarmaxModel};
 use controller::link::VfdPort;
 use controller::modbus::{crc16, Frame};
-use controller::scada::{Mode, Status};
+use controller::types::{Arithmetic, Mode, Status};
 use model_core::WhiteBox;
 
 use pump_models::{flow as flow_model, pressure as pressure_model};
@@ -18,10 +18,10 @@ type Board = VirtualBoard<
     { flow_model::HIDDEN },
 >;
 
-fn setup(mode: Mode, setpoint: u16) -> Board {
+fn setup(mode: Mode, setpoint_pct: f32) -> Board {
     let cfg = Config {
         initial_mode: mode,
-        initial_setpoint: setpoint,
+        initial_setpoint_pct: setpoint_pct,
         virtual_bench: true,
         ..Config::bench()
     };
@@ -63,7 +63,7 @@ fn rel(a: f32, b: f32) -> f32 {
 
 #[test]
 fn manual_50_pct_reaches_the_operating_point_in_3_s() {
-    let mut b = setup(Mode::Stop, 0);
+    let mut b = setup(Mode::Stop, 0.0);
     run(&mut b, 500);
     assert_eq!(b.io.torque_ref_pct(), 0.0);
     // What a SCADA does: setpoint 50 %, manual mode (FC 16).
@@ -100,7 +100,7 @@ fn manual_50_pct_reaches_the_operating_point_in_3_s() {
 
 #[test]
 fn vfd_link_loss_forces_zero_torque_until_it_is_back() {
-    let mut b = setup(Mode::Manual, 4000);
+    let mut b = setup(Mode::Manual, 40.0);
     run(&mut b, 200);
     assert_eq!(b.io.torque_ref_pct(), 40.0);
     assert!(!b.vfd.master().alarm());
@@ -135,7 +135,7 @@ fn vfd_link_loss_forces_zero_torque_until_it_is_back() {
 
 #[test]
 fn a_transmitter_fault_is_flagged_within_one_sample_and_models_run_on() {
-    let mut b = setup(Mode::Manual, 6000);
+    let mut b = setup(Mode::Manual, 60.0);
     run(&mut b, 3000);
     let before = read_inputs(&mut b);
     b.io.bench.force_pressure_ma = Some(2.0);
@@ -168,8 +168,8 @@ fn a_transmitter_fault_is_flagged_within_one_sample_and_models_run_on() {
 
 #[test]
 fn profile_logs_once_a_second_and_repeats_from_its_seed() {
-    let mut a = setup(Mode::Profile, 0);
-    let mut b = setup(Mode::Profile, 0);
+    let mut a = setup(Mode::Profile, 0.0);
+    let mut b = setup(Mode::Profile, 0.0);
     let la = run(&mut a, 5001);
     let lb = run(&mut b, 5001);
     assert_eq!(la.len(), 6);
@@ -185,14 +185,14 @@ fn profile_logs_once_a_second_and_repeats_from_its_seed() {
 
 #[test]
 fn fixed_point_narmax_follows_f32() {
-    let mut a = setup(Mode::Profile, 0);
-    let mut b = setup(Mode::Profile, 0);
+    let mut a = setup(Mode::Profile, 0.0);
+    let mut b = setup(Mode::Profile, 0.0);
     let mut r = Frame::new();
     b.scada
         .handle(&with_crc(&[1, 6, 0, 2, 0, 1]), &mut r)
         .unwrap();
     let (la, lb) = (run(&mut a, 10_001), run(&mut b, 10_001));
-    assert_eq!(lb[3].arithmetic, controller::scada::Arithmetic::Fixed);
+    assert_eq!(lb[3].arithmetic, Arithmetic::Q15);
     for (x, y) in la.iter().zip(&lb).skip(1) {
         let (p, pq) = (x.values.narmax_pressure_mca, y.values.narmax_pressure_mca);
         assert!((p - pq).abs() < 0.02, "{p} vs {pq}");
@@ -201,7 +201,7 @@ fn fixed_point_narmax_follows_f32() {
 
 #[test]
 fn residuals_are_measured_minus_predicted() {
-    let mut b = setup(Mode::Manual, 7000);
+    let mut b = setup(Mode::Manual, 70.0);
     run(&mut b, 4001);
     let v = *b.controller.published();
     assert!(
@@ -259,7 +259,7 @@ fn run_faulty(b: &mut Board, drop_function: Option<u8>, ms: u32) {
 #[test]
 fn a_drive_that_takes_no_writes_forces_zero_and_one_that_gives_no_reads_is_flagged() {
     // Writes fail: link alarm, 0 % on the analog output, readings still valid.
-    let mut b = setup(Mode::Manual, 5000);
+    let mut b = setup(Mode::Manual, 50.0);
     run_faulty(&mut b, None, 500);
     assert_eq!(b.io.torque_ref_pct(), 50.0);
     run_faulty(&mut b, Some(6), 3000);
@@ -325,7 +325,7 @@ fn read_observer(b: &mut Board) -> (f32, f32, f32, u16) {
 #[test]
 fn the_observer_follows_the_valve_and_the_alarms_follow_injected_faults() {
     use model_core::monitor::{DRY_RUN, LOAD_CHANGED, PRESSURE_TRANSMITTER, VFD_LINK};
-    let mut b = setup(Mode::Manual, 5000);
+    let mut b = setup(Mode::Manual, 50.0);
     run(&mut b, 5000);
     let (w, q, k2, alarms) = read_observer(&mut b);
     let truth = b.io.bench.signals();
@@ -382,7 +382,7 @@ fn the_observer_follows_the_valve_and_the_alarms_follow_injected_faults() {
 /// observer) into the paper's pulses for a minute: no alarm on the healthy virtual bench.
 #[test]
 fn no_alarm_from_rest_through_a_minute_of_pulses() {
-    let mut b = setup(Mode::Stop, 0);
+    let mut b = setup(Mode::Stop, 0.0);
     run(&mut b, 5000);
     assert_eq!(read_observer(&mut b).3, 0, "at rest");
     let mut r = Frame::new();
@@ -432,7 +432,7 @@ fn run_until(
 #[test]
 fn a_dry_run_trips_to_zero_and_restarts_only_when_acknowledged_and_commanded() {
     use model_core::monitor::{DRY_RUN, OVERSPEED};
-    let mut b = setup(Mode::Manual, 5000);
+    let mut b = setup(Mode::Manual, 50.0);
     run(&mut b, 5000);
     assert_eq!(b.io.torque_ref_pct(), 50.0);
     write_holding(&mut b, 4, 1);
@@ -490,7 +490,7 @@ fn a_dry_run_trips_to_zero_and_restarts_only_when_acknowledged_and_commanded() {
 #[test]
 fn a_trip_whose_cause_stands_cannot_be_acknowledged_and_nothing_restarts_by_itself() {
     use model_core::monitor::DRY_RUN;
-    let mut b = setup(Mode::Manual, 5000);
+    let mut b = setup(Mode::Manual, 50.0);
     run(&mut b, 3000);
     write_holding(&mut b, 4, 1);
     run(&mut b, 8000);
@@ -538,7 +538,7 @@ fn a_trip_whose_cause_stands_cannot_be_acknowledged_and_nothing_restarts_by_itse
 fn an_overspeed_trips_within_100_ms_from_the_drive_or_the_observer() {
     use model_core::monitor::OVERSPEED;
     for blind in [false, true] {
-        let mut b = setup(Mode::Manual, 5000);
+        let mut b = setup(Mode::Manual, 50.0);
         run(&mut b, 5000);
         if blind {
             // The drive answers writes but no reads: readings invalid, the observer's speed.
@@ -620,7 +620,7 @@ fn an_overspeed_trips_within_100_ms_from_the_drive_or_the_observer() {
 #[test]
 fn protections_configured_as_warnings_do_not_trip() {
     use model_core::monitor::{DRY_RUN, OVERSPEED};
-    let mut b = setup(Mode::Manual, 5000);
+    let mut b = setup(Mode::Manual, 50.0);
     run(&mut b, 3000);
     write_holding(&mut b, 6, 0);
     write_holding(&mut b, 5, 1000);
@@ -645,7 +645,7 @@ fn protections_configured_as_warnings_do_not_trip() {
 #[test]
 fn no_flow_warns_by_default_and_trips_after_its_delay_when_configured() {
     use model_core::monitor::NO_FLOW;
-    let mut b = setup(Mode::Manual, 5000);
+    let mut b = setup(Mode::Manual, 50.0);
     run(&mut b, 3000);
     b.io.bench.set_valve_factor(8.0).unwrap();
     let raised = run_until(&mut b, 10_000, |b| input(b, 21) & NO_FLOW != 0).expect("no flow");
@@ -687,7 +687,7 @@ fn no_flow_warns_by_default_and_trips_after_its_delay_when_configured() {
 #[test]
 fn a_transmitter_fault_injected_at_rest_clears_once_removed() {
     use model_core::monitor::PRESSURE_TRANSMITTER;
-    let mut b = setup(Mode::Stop, 0);
+    let mut b = setup(Mode::Stop, 0.0);
     run(&mut b, 3000);
     write_holding(&mut b, 4, 2);
     run(&mut b, 2000);
@@ -707,7 +707,7 @@ fn a_transmitter_fault_injected_at_rest_clears_once_removed() {
 fn one_stop_write_acknowledges_a_cured_dry_run() {
     use model_core::monitor::DRY_RUN;
     for trip_on in [0u16, 3] {
-        let mut b = setup(Mode::Manual, 5000);
+        let mut b = setup(Mode::Manual, 50.0);
         write_holding(&mut b, 6, trip_on);
         run(&mut b, 5000);
         write_holding(&mut b, 4, 1);
@@ -796,7 +796,7 @@ mod protection_properties {
         /// still raised on the next step ⇒ tripped there; the torque always finite and within 0..=100 %.
         #[test]
         fn no_write_sequence_leaves_a_trip_unacted(ops in proptest::collection::vec(op(), 1..14)) {
-            let mut b = setup(Mode::Manual, 5000);
+            let mut b = setup(Mode::Manual, 50.0);
             run(&mut b, 2000);
             let mut prev_alarms = 0u16;
             for o in ops {

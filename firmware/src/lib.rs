@@ -28,8 +28,8 @@
 #![warn(missing_docs)]
 
 pub use controller::control::{Commands, Inputs, Outputs, VfdStatus};
-use controller::control::{Config, Controller, Error, NarmaxModel};
-pub use controller::scada::Published;
+use controller::control::{Config, Error, NarmaxModel};
+pub use controller::types::Published;
 use core::sync::atomic::{AtomicU32, Ordering};
 use model_core::narmax::mcu::build_period_ms;
 
@@ -47,8 +47,8 @@ const _: () = assert!(
     "the flow model's period must be a whole multiple of the pressure model's"
 );
 
-/// The controller with the compiled-in models.
-pub type Core = Controller<
+/// The controller ([`controller::control::Controller`]) with the compiled-in models.
+pub type Controller = controller::control::Controller<
     { models::pressure::FRAMES },
     { models::pressure::HIDDEN },
     { models::flow::FRAMES },
@@ -71,7 +71,7 @@ pub fn narmax_models() -> Result<
 }
 
 /// Builds the controller (the models are `static`s the compiler built and checked).
-pub fn build_core(config: &Config) -> Result<Core, Error> {
+pub fn build_controller(config: &Config) -> Result<Controller, Error> {
     let (p, q) = narmax_models()?;
     Controller::new(config, p, q)
 }
@@ -204,7 +204,7 @@ pub mod port {
     use controller::modbus::Frame;
     use controller::rtu::Rs485;
     use controller::rtu::RtuFramer;
-    use controller::scada::Published;
+    use controller::types::Published;
     use embedded_hal::digital::OutputPin;
     use embedded_hal_nb::serial::{Read, Write};
     use heapless::spsc::{Consumer, Producer};

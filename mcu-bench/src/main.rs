@@ -19,7 +19,7 @@
 
 use controller::bench::{VirtualBenchConfig, VirtualBoard};
 use controller::control::{Config, NarmaxModel};
-use controller::scada::Mode;
+use controller::types::Mode;
 use core::fmt::Write;
 use core::hint::black_box;
 use cortex_m_rt::entry;

@@ -6,10 +6,15 @@
 //! - a first-order transmitter lag (pressure 20 ms; flow 40 ms, a transmitter that settles in
 //!   about 100 ms as the paper's does; speed none); the pressure and flow lags can be set
 //!   (`--pressure-lag-ms`, `--flow-lag-ms`, 0..2000 ms);
-//! - Gaussian noise (pressure 0.003 mca, flow 0.02 l/s, speed 0.5 rpm, 1 σ);
-//! - 12-bit quantisation of the 4-20 mA loop: an ADC reading 0..24 mA in 4096 codes, a
-//!   transmitter span of 0..10 mca (pressure) and 0..30 l/s (flow): one code is 3.7 mm of
-//!   water and 0.011 l/s.
+//! - noise (pressure 0.003 mca, flow 0.02 l/s, speed 0.5 rpm, 1 σ), the controller's
+//!   transmitter noise ([`controller::analog::noise`]: a sum of four uniform draws, bounded
+//!   at ±3.46 σ);
+//! - the 4-20 mA loop and its ADC, the model the controller and its virtual bench use
+//!   ([`controller::analog`]): a transmitter span of 0..10 mca (pressure) and 0..30 l/s
+//!   (flow), saturated at NAMUR NE 43's measuring range 3.8..20.5 mA (−0.125..10.3125 mca,
+//!   −0.375..30.9375 l/s), read through a 150 Ω shunt by a 12-bit 3.3 V ADC (0..22 mA in 4096
+//!   codes): one code is 3.4 mm of water and 0.010 l/s. The logged value is the code's
+//!   current on the span's line (not clamped to the span, as a logger records it).
 //!
 //! Not modelled: transmitter drift and offsets, VFD torque ripple.
 //! The bench itself is the paper's white-box model in f64, integrated with RK4 at ≤ 1 ms.
@@ -43,6 +48,7 @@
 use crate::error::Failure;
 use crate::input::{shown, TorqueInput};
 use crate::num::Short;
+use controller::analog::{self, LoopConfig, FLOW_LOOP, PRESSURE_LOOP};
 use model_core::equations::{
     electromagnetic_torque_pct, load_torque_pct, speed_derivative_rpm_per_s, valve_pressure_mca,
 };
@@ -57,45 +63,42 @@ pub struct Transmitter {
     pub tau_s: f64,
     /// Noise standard deviation, signal units.
     pub noise: f64,
-    /// 4-20 mA span: the value at 20 mA (4 mA is 0); 0 for no quantisation.
-    pub span: f64,
+    /// The 4-20 mA loop (span, shunt, ADC) that carries the reading; `None`: not quantised.
+    pub adc: Option<LoopConfig>,
 }
 
-/// Pressure transmitter: 20 ms lag, 3 mm water noise, 0..10 mca.
+/// Pressure transmitter: 20 ms lag, 3 mm water noise, 0..10 mca ([`PRESSURE_LOOP`]).
 pub const PRESSURE: Transmitter = Transmitter {
     tau_s: 0.020,
     noise: 0.003,
-    span: 10.0,
+    adc: Some(PRESSURE_LOOP),
 };
-/// Flow transmitter: 40 ms lag, 0.02 l/s noise, 0..30 l/s.
+/// Flow transmitter: 40 ms lag, 0.02 l/s noise, 0..30 l/s ([`FLOW_LOOP`]).
 pub const FLOW: Transmitter = Transmitter {
     tau_s: 0.040,
     noise: 0.02,
-    span: 30.0,
+    adc: Some(FLOW_LOOP),
 };
 /// Speed (encoder used during identification only): no lag, 0.5 rpm noise, not quantised.
 pub const SPEED: Transmitter = Transmitter {
     tau_s: 0.0,
     noise: 0.5,
-    span: 0.0,
+    adc: None,
 };
-/// ADC: full scale in mA and number of codes.
-const ADC_FULL_SCALE_MA: f64 = 24.0;
-const ADC_CODES: f64 = 4096.0;
 
 impl Transmitter {
-    /// Reading: noise added to the lagged value, then the 4-20 mA loop quantised by the ADC.
+    /// Reading: noise added to the lagged value, then the 4-20 mA transmitter and the ADC
+    /// ([`controller::analog`], in f32 as on the board), the code's current read back on the
+    /// span's line.
     fn read(&self, lagged: f64, rng: &mut SplitMix64) -> f64 {
-        let noisy = lagged + self.noise * gaussian(rng);
-        if self.span <= 0.0 {
-            return noisy;
+        let noisy = lagged + self.noise * f64::from(analog::noise(rng));
+        match &self.adc {
+            None => noisy,
+            Some(l) => {
+                let code = l.code(l.transmitter_ma(noisy as f32));
+                f64::from(l.value_unclamped(l.current_ma(code)))
+            }
         }
-        let ma = 4.0 + 16.0 * noisy / self.span;
-        let code = (ma / ADC_FULL_SCALE_MA * (ADC_CODES - 1.0))
-            .round()
-            .clamp(0.0, ADC_CODES - 1.0);
-        let ma_q = code / (ADC_CODES - 1.0) * ADC_FULL_SCALE_MA;
-        (ma_q - 4.0) / 16.0 * self.span
     }
 
     /// Advances the lag state `x` toward `target` over `h` seconds (exact for a held target).
@@ -106,13 +109,6 @@ impl Transmitter {
             *x += (1.0 - (-h / self.tau_s).exp()) * (target - *x);
         }
     }
-}
-
-/// Standard normal draw (Box-Muller).
-pub fn gaussian(rng: &mut SplitMix64) -> f64 {
-    let u1 = rng.next_f64().max(1e-300);
-    let u2 = rng.next_f64();
-    (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
 }
 
 /// Largest RK4 step of the bench, ms (each interval between input rows is split into equal
@@ -598,16 +594,25 @@ mod tests {
             ..PRESSURE
         };
         let a = quiet.read(2.0, &mut rng);
-        let lsb = 10.0 * ADC_FULL_SCALE_MA / 16.0 / (ADC_CODES - 1.0);
-        assert!((a - 2.0).abs() <= lsb / 2.0 + 1e-12);
+        // One code of the shared front end (22 mA over 4095 codes) on the 0..10 mca span.
+        let l = PRESSURE_LOOP;
+        let lsb = f64::from(l.current_ma(1)) * 10.0 / 16.0;
+        assert!((lsb - 0.00336).abs() < 1e-5, "{lsb}");
+        assert!((a - 2.0).abs() <= lsb / 2.0 + 1e-6, "{a}");
         let n = 20_000;
         let xs: Vec<f64> = (0..n).map(|_| FLOW.read(15.0, &mut rng)).collect();
         let mean = xs.iter().sum::<f64>() / n as f64;
         let sd = (xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n as f64).sqrt();
+        // 0.02 l/s of noise and a code's 0.010 l/s of quantisation (uniform: 0.0029 l/s).
         assert!(
-            (mean - 15.0).abs() < 0.01 && (sd - 0.022).abs() < 0.004,
+            (mean - 15.0).abs() < 0.01 && (sd - 0.0202).abs() < 0.004,
             "{mean} {sd}"
         );
+        // Below and above the span the transmitter saturates at NE 43's measuring range.
+        let below = quiet.read(-5.0, &mut rng);
+        let above = quiet.read(50.0, &mut rng);
+        assert!((below + 0.125).abs() <= lsb, "{below}");
+        assert!((above - 10.3125).abs() <= lsb, "{above}");
     }
 
     #[test]

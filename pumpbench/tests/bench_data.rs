@@ -33,21 +33,23 @@ fn input(seconds: f64, ts_s: f64, torque: impl Fn(f64) -> f64) -> String {
 }
 
 /// The record of `u.csv` (10 rows, irregular times, torque steps, seed 7) as `bench-data`
-/// wrote it before valve steps, curve errors, lag options and truth columns existed (made by
-/// that binary, commit cdcaae8).
+/// writes it without valve steps, curve errors, lag options and truth columns: made by that
+/// binary at commit cdcaae8, its readings re-made once when bench-data took the controller's
+/// transmitter, ADC and noise model (issue 20: 22 mA over 4096 codes instead of 24 mA, the
+/// sum-of-uniforms noise instead of Box-Muller; the same seed, another sequence).
 const U_CSV: &str = "t_s,torque_ref_pct\n0,40\n0.05,40\n0.1,70\n0.1375,70\n0.2,25\n0.5,25\n\
                      0.5004,60\n1.25,60\n2,0\n2.1,100\n";
 const U_RECORD_BEFORE: &str = "t_s,torque_ref_pct,speed_rpm,flow_lps,pressure_mca
-0,40,1103.16,14.2253,2.12271
-0.05,40,1102.18,14.2033,2.12637
-0.1,70,1102.62,14.2253,2.11905
-0.1375,70,1146.72,14.4341,2.21429
-0.2,25,1210.54,15.0275,2.47802
-0.5,25,1027.96,13.5659,1.86630
-0.5004,60,1028.73,13.5879,1.87363
-1.25,60,1328.93,16.8077,3.07509
-2,0,1351.11,17.1374,3.19231
-2.1,100,1154.25,15.6099,2.46703
+0,40,1102.38,14.2179,2.12027
+0.05,40,1103.51,14.2582,2.12027
+0.1,70,1102.77,14.2482,2.12027
+0.1375,70,1146.18,14.4295,2.21764
+0.2,25,1210.78,15.0339,2.47955
+0.5,25,1027.85,13.5833,1.87180
+0.5004,60,1028.21,13.5632,1.87180
+1.25,60,1327.51,16.8370,3.07723
+2,0,1352.10,17.1190,3.19811
+2.1,100,1154.67,15.6584,2.46948
 ";
 
 #[test]

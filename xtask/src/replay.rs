@@ -78,7 +78,7 @@ fn check_fault_run(ok: bool, fault: &str) -> Result {
 fn host_replay(header: &str, run_ms: u32) -> Result<Vec<String>> {
     use controller::bench::{VirtualBenchConfig, VirtualBoard};
     use controller::control::{Config, NarmaxModel};
-    use controller::scada::{Arithmetic, Mode};
+    use controller::types::{Arithmetic, Mode};
     let seed: u64 = num(header, "seed")?;
     let mode = match num::<u8>(header, "mode")? {
         0 => Mode::Stop,
@@ -89,7 +89,7 @@ fn host_replay(header: &str, run_ms: u32) -> Result<Vec<String>> {
         .ok_or_else(|| format!("bad 'narmax' in line: {header}"))?;
     let config = Config {
         initial_mode: mode,
-        initial_setpoint: num(header, "setpoint")?,
+        initial_setpoint_pct: controller::scada::setpoint_pct(num(header, "setpoint")?),
         profile_seed: seed,
         initial_arithmetic: arithmetic,
         virtual_bench: true,

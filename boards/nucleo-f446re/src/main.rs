@@ -6,7 +6,7 @@
 //! | priority | task | here |
 //! |---|---|---|
 //! | 4 | `usart1`, `usart6` (RXNE, TC) and `tim6`, `tim7` (the RTU gap) | bytes into and out of `heapless` queues |
-//! | 3 | `control` (SysTick, 1 kHz) | one [`firmware::Core`] step, ADC, DAC, watchdog, LED |
+//! | 3 | `control` (SysTick, 1 kHz) | one [`firmware::Controller`] step, ADC, DAC, watchdog, LED |
 //! | 2 | `vfd` | the VFD master, one pass per step |
 //! | 1 | `scada`, `log` | the SCADA server, defmt lines |
 //! | idle | | `wfi` |
@@ -153,9 +153,9 @@ mod app {
     use controller::link::{ScadaLink, VfdLink};
     use controller::modbus::Frame;
     use controller::rtu::{gap_us, Rs485};
-    use controller::scada::Published;
+    use controller::types::Published;
     use firmware::port::{PortIsr, PortTask, RX_QUEUE, TX_QUEUE};
-    use firmware::{record_max, Core};
+    use firmware::{record_max, Controller};
     use heapless::spsc::Queue;
     use rtic_sync::channel::{Receiver, Sender};
     use rtic_sync::signal::{SignalReader, SignalWriter};
@@ -202,7 +202,7 @@ mod app {
 
     #[local]
     struct Local {
-        core: Core,
+        core: Controller,
         adc: Adc<pac::ADC1>,
         pressure_pin: PA0<Analog>,
         flow_pin: PA1<Analog>,
@@ -234,7 +234,7 @@ mod app {
         let config = Config::bench();
         // A configuration the controller refuses is a build-time mistake: panic-probe logs
         // it and the HardFault handler resets with the torque reference off.
-        let core = firmware::build_core(&config).unwrap_or_else(|_| panic!("controller"));
+        let core = firmware::build_controller(&config).unwrap_or_else(|_| panic!("controller"));
         let scada = ScadaLink::new(&config).unwrap_or_else(|_| panic!("SCADA"));
         let vfd = VfdLink::new(config.vfd).unwrap_or_else(|_| panic!("VFD map"));
 

@@ -6,7 +6,7 @@
 //! `vfd=uart` (the VFD master on USART2 instead of the in-process drive). A bad argument is
 //! reported and the firmware exits with status 1.
 
-use controller::scada::{Arithmetic, Mode};
+use controller::types::{Arithmetic, Mode};
 
 /// Start-up options from the semihosting command line.
 pub struct Args {
@@ -66,7 +66,7 @@ pub fn parse_args(line: &[u8]) -> Result<Args, &[u8]> {
             b"narmax" => {
                 a.arithmetic = match value {
                     b"f32" => Arithmetic::F32,
-                    b"q15" => Arithmetic::Fixed,
+                    b"q15" => Arithmetic::Q15,
                     _ => return Err(word),
                 }
             }

@@ -4,7 +4,7 @@
 //! | priority | task | here |
 //! |---|---|---|
 //! | 4 | `usart1`, `usart2` | SCADA and VFD bytes into `heapless` queues, frames out |
-//! | 3 | `control` (SysTick) | one [`firmware::Core`] step per elapsed ms, the virtual bench stepped |
+//! | 3 | `control` (SysTick) | one [`firmware::Controller`] step per elapsed ms, the virtual bench stepped |
 //! | 2 | `vfd` | the VFD master, one pass per step |
 //! | 1 | `scada`, `log` | the SCADA server, defmt lines |
 //! | idle | | `wfi` |
@@ -63,9 +63,9 @@ mod app {
     use controller::link::{ScadaLink, VfdLink};
     use controller::modbus::{request_at_end, Frame};
     use controller::rtu::{NoDe, Rs485};
-    use controller::scada::Published;
+    use controller::types::Published;
     use firmware::port::{PortIsr, PortTask, RX_QUEUE, TX_QUEUE};
-    use firmware::{record_max, Core};
+    use firmware::{record_max, Controller};
     use heapless::spsc::Queue;
     use rtic_sync::channel::{Receiver, Sender};
     use rtic_sync::signal::{SignalReader, SignalWriter};
@@ -98,7 +98,7 @@ mod app {
 
     #[local]
     struct Local {
-        core: Core,
+        core: Controller,
         ms: firmware::MsClock,
         run_ms: Option<u32>,
         stopped: bool,
@@ -137,7 +137,7 @@ mod app {
         };
         let config = Config {
             initial_mode: a.mode,
-            initial_setpoint: a.setpoint,
+            initial_setpoint_pct: controller::scada::setpoint_pct(a.setpoint),
             profile_seed: u64::from(a.seed),
             initial_arithmetic: a.arithmetic,
             virtual_bench: true,
@@ -147,7 +147,7 @@ mod app {
             defmt::error!("cannot start: {=str}", what);
             exit(false)
         };
-        let core = firmware::build_core(&config).unwrap_or_else(|_| fail("controller"));
+        let core = firmware::build_controller(&config).unwrap_or_else(|_| fail("controller"));
         let scada = ScadaLink::new(&config).unwrap_or_else(|_| fail("SCADA"));
         let vfd = VfdLink::new(config.vfd).unwrap_or_else(|_| fail("VFD link"));
         let bench = VirtualBench::new(VirtualBenchConfig::default_offsets(u64::from(a.seed)))
@@ -196,9 +196,9 @@ mod app {
         let (vfd_req, vfd_wait) = make_signal!(Request);
         let (log_tx, log_rx) = make_channel!(LogMsg, LOG_CAP);
         defmt::info!(
-            "firmware: virtual bench, SCADA unit 1 on USART1, VFD {=str}, mode={=u8} setpoint={=u16} seed={=u32} narmax={=str}{=str}",
+            "firmware: virtual bench, SCADA unit 1 on USART1, VFD {=str}, mode={=u16} setpoint={=u16} seed={=u32} narmax={=str}{=str}",
             if a.vfd_uart { "on USART2" } else { "virtual" },
-            a.mode as u8,
+            controller::scada::mode_register(a.mode),
             a.setpoint,
             a.seed,
             a.arithmetic.name(),
