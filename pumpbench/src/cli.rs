@@ -138,9 +138,9 @@ pub struct VfdSimArgs {
     pub seed: u64,
 }
 
-/// Options of `pumpbench simulate` (their documentation is their help text).
+/// Which model runs, in which arithmetic (`simulate`, `steady`).
 #[derive(Args)]
-pub struct SimulateArgs {
+pub struct ModelChoice {
     /// Model to run.
     #[arg(long, value_enum)]
     pub model: Model,
@@ -150,6 +150,14 @@ pub struct SimulateArgs {
     /// NARMAX model file (with --model narmax).
     #[arg(long)]
     pub weights: Option<PathBuf>,
+}
+
+/// Options of `pumpbench simulate` (their documentation is their help text).
+#[derive(Args)]
+pub struct SimulateArgs {
+    /// The model and its arithmetic.
+    #[command(flatten)]
+    pub choice: ModelChoice,
     /// Largest internal RK4 step, ms (0.001..=100). Each interval between input
     /// rows is split into equal steps no longer than this, so every input time is hit.
     #[arg(long, default_value_t = 1.0, value_parser = parse_step_ms)]
@@ -167,15 +175,9 @@ pub struct SimulateArgs {
 /// Options of `pumpbench steady` (their documentation is their help text).
 #[derive(Args)]
 pub struct SteadyArgs {
-    /// Model to run.
-    #[arg(long, value_enum)]
-    pub model: Model,
-    /// Arithmetic.
-    #[arg(long, value_enum, default_value = "f64")]
-    pub precision: Precision,
-    /// NARMAX model file (with --model narmax).
-    #[arg(long)]
-    pub weights: Option<PathBuf>,
+    /// The model and its arithmetic.
+    #[command(flatten)]
+    pub choice: ModelChoice,
     /// Torque references, % (0..100): a list `5,10,15` or a range `5:85:5`
     /// (start:stop:step, stop included).
     #[arg(long, allow_hyphen_values = true)]

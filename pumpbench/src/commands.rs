@@ -3,7 +3,8 @@
 
 use crate::cli::{
     check_optional_output, need_weights, weights_input, BenchDataArgs, ExciteArgs, ExportArgs,
-    IdentifyArgs, Model, Precision, SimulateArgs, SteadyArgs, StudyArgs, ValidateArgs, VfdSimArgs,
+    IdentifyArgs, Model, ModelChoice, Precision, SimulateArgs, SteadyArgs, StudyArgs, ValidateArgs,
+    VfdSimArgs,
 };
 use crate::error::Failure;
 use crate::{
@@ -178,43 +179,31 @@ pub fn export(a: ExportArgs) -> Result<(), Failure> {
 
 /// `pumpbench bench-data`.
 pub fn bench_data(a: BenchDataArgs) -> Result<(), Failure> {
-    let BenchDataArgs {
-        input,
-        seed,
-        output,
-        valve_steps,
-        curve_error,
-        water_inertia,
-        drive_lag_ms,
-        truth,
-        flow_lag_ms,
-        pressure_lag_ms,
-    } = a;
     // The options first (no file touched), then the output, then the input.
     let options = benchdata::Options {
-        seed,
-        valve_steps: match valve_steps.as_deref() {
+        seed: a.seed,
+        valve_steps: match a.valve_steps.as_deref() {
             Some(text) => benchdata::parse_valve_steps(text).map_err(Failure::usage)?,
             None => Vec::new(),
         },
-        curve_error: benchdata::parse_curve_error(&curve_error).map_err(Failure::usage)?,
+        curve_error: benchdata::parse_curve_error(&a.curve_error).map_err(Failure::usage)?,
         dynamics: benchdata::Dynamics {
-            water_inertia: benchdata::parse_water_inertia(&water_inertia)
+            water_inertia: benchdata::parse_water_inertia(&a.water_inertia)
                 .map_err(Failure::usage)?,
-            drive_lag_s: benchdata::parse_lag_ms("--drive-lag-ms", &drive_lag_ms)
+            drive_lag_s: benchdata::parse_lag_ms("--drive-lag-ms", &a.drive_lag_ms)
                 .map_err(Failure::usage)?,
         },
-        truth,
-        flow_lag_s: benchdata::parse_lag_ms("--flow-lag-ms", &flow_lag_ms)
+        truth: a.truth,
+        flow_lag_s: benchdata::parse_lag_ms("--flow-lag-ms", &a.flow_lag_ms)
             .map_err(Failure::usage)?,
-        pressure_lag_s: benchdata::parse_lag_ms("--pressure-lag-ms", &pressure_lag_ms)
+        pressure_lag_s: benchdata::parse_lag_ms("--pressure-lag-ms", &a.pressure_lag_ms)
             .map_err(Failure::usage)?,
     };
     benchdata::true_bench(options.curve_error).map_err(Failure::usage)?;
-    check_optional_output(&[("--input", &input)], output.as_deref())?;
+    check_optional_output(&[("--input", &a.input)], a.output.as_deref())?;
     let data =
-        input::read_input_to_integrate(&input, benchdata::STEP_MS, benchdata::TOO_MANY_STEPS)?;
-    output::write_csv(output.as_deref(), |w| benchdata::run(&data, &options, w))
+        input::read_input_to_integrate(&a.input, benchdata::STEP_MS, benchdata::TOO_MANY_STEPS)?;
+    output::write_csv(a.output.as_deref(), |w| benchdata::run(&data, &options, w))
 }
 
 /// `pumpbench study`.
@@ -258,9 +247,12 @@ pub fn study(a: StudyArgs) -> Result<(), Failure> {
 /// `pumpbench simulate`.
 pub fn simulate(a: SimulateArgs) -> Result<(), Failure> {
     let SimulateArgs {
-        model,
-        precision,
-        weights,
+        choice:
+            ModelChoice {
+                model,
+                precision,
+                weights,
+            },
         step_ms,
         input,
         output,
@@ -294,9 +286,12 @@ pub fn simulate(a: SimulateArgs) -> Result<(), Failure> {
 /// `pumpbench steady`.
 pub fn steady(a: SteadyArgs) -> Result<(), Failure> {
     let SteadyArgs {
-        model,
-        precision,
-        weights,
+        choice:
+            ModelChoice {
+                model,
+                precision,
+                weights,
+            },
         torque_pct,
         output,
     } = a;

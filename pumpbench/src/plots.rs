@@ -259,38 +259,36 @@ pub fn figures(dir: &Path, p: &TargetResult, q: &TargetResult) -> Result<(), Fai
         code: 1,
         message: format!("cannot draw {}: {e}", dir.join(name).display()),
     };
-    let name = FIGURES[0];
-    validation_figure(
-        &dir.join(name),
-        "NARMAX models, free run on the validation records (cf. paper Fig. 4)",
-        [(p, &p.narmax), (q, &q.narmax)],
-        "NARMAX free run",
-    )
-    .map_err(|e| fail(name, e))?;
-    let name = FIGURES[1];
-    static_figure(
-        &dir.join(name),
-        "NARMAX models, static curves (cf. paper Fig. 5)",
-        [(p, &p.narmax_curve), (q, &q.narmax_curve)],
-        "NARMAX steady output",
-    )
-    .map_err(|e| fail(name, e))?;
-    let name = FIGURES[2];
-    validation_figure(
-        &dir.join(name),
-        "White-box model on the validation records (cf. paper Fig. 7)",
-        [(p, &p.whitebox), (q, &q.whitebox)],
-        "white-box model",
-    )
-    .map_err(|e| fail(name, e))?;
-    let name = FIGURES[3];
-    static_figure(
-        &dir.join(name),
-        "White-box model, static curves (cf. paper Fig. 8)",
-        [(p, &p.whitebox_curve), (q, &q.whitebox_curve)],
-        "white-box steady state",
-    )
-    .map_err(|e| fail(name, e))?;
+    type Draw<'a> = &'a dyn Fn(&Path) -> Result<(), Box<dyn Error>>;
+    let draw = |i: usize, f: Draw| f(&dir.join(FIGURES[i])).map_err(|e| fail(FIGURES[i], e));
+    draw(0, &|path| {
+        let title = "NARMAX models, free run on the validation records (cf. paper Fig. 4)";
+        validation_figure(
+            path,
+            title,
+            [(p, &p.narmax), (q, &q.narmax)],
+            "NARMAX free run",
+        )
+    })?;
+    draw(1, &|path| {
+        let title = "NARMAX models, static curves (cf. paper Fig. 5)";
+        let curves = [(p, &p.narmax_curve[..]), (q, &q.narmax_curve[..])];
+        static_figure(path, title, curves, "NARMAX steady output")
+    })?;
+    draw(2, &|path| {
+        let title = "White-box model on the validation records (cf. paper Fig. 7)";
+        validation_figure(
+            path,
+            title,
+            [(p, &p.whitebox), (q, &q.whitebox)],
+            "white-box model",
+        )
+    })?;
+    draw(3, &|path| {
+        let title = "White-box model, static curves (cf. paper Fig. 8)";
+        let curves = [(p, &p.whitebox_curve[..]), (q, &q.whitebox_curve[..])];
+        static_figure(path, title, curves, "white-box steady state")
+    })?;
     Ok(())
 }
 

@@ -132,16 +132,6 @@ struct Seen {
 /// `margin:` line: `lost` and `bytes`; its errors and warnings); an error with the report if
 /// a check fails.
 fn verdict(seen: &Seen, lines: &[String]) -> Result<String> {
-    let &Seen {
-        seconds,
-        icount,
-        sent,
-        answered,
-        status_and,
-        status_or,
-        wall,
-        rate,
-    } = seen;
     let margin = lines
         .iter()
         .rev()
@@ -151,12 +141,15 @@ fn verdict(seen: &Seen, lines: &[String]) -> Result<String> {
     let get = |k: &str| -> Result<u64> { num(&margin, k) };
     let (lost, bytes) = (get("lost")?, get("bytes")?);
     let mut report = format!(
-        "flood, {seconds} s {}, VFD on USART2 to pumpbench vfd-sim: {answered} of {sent} requests answered ({:.0}/s), loop at {:+.2} % of wall time{}\n  firmware: {margin}\n  rx_wait_bound = usart_max + masked_max; {}\n",
-        if icount { "under -icount shift=0" } else { "in real time" },
-        f64::from(sent) / wall,
-        rate * 100.0,
-        if icount { " (QEMU's clock, not checked)" } else { "" },
-        if icount {
+        "flood, {} s {}, VFD on USART2 to pumpbench vfd-sim: {} of {} requests answered ({:.0}/s), loop at {:+.2} % of wall time{}\n  firmware: {margin}\n  rx_wait_bound = usart_max + masked_max; {}\n",
+        seen.seconds,
+        if seen.icount { "under -icount shift=0" } else { "in real time" },
+        seen.answered,
+        seen.sent,
+        f64::from(seen.sent) / seen.wall,
+        seen.rate * 100.0,
+        if seen.icount { " (QEMU's clock, not checked)" } else { "" },
+        if seen.icount {
             "counts are instructions (QEMU -icount shift=0)"
         } else {
             "counts are QEMU's virtual ns in real time: the host's speed, not the MCU's"
@@ -168,22 +161,24 @@ fn verdict(seen: &Seen, lines: &[String]) -> Result<String> {
     {
         report.push_str(&format!("  firmware said: {l}\n"));
     }
-    if answered != sent {
+    if seen.answered != seen.sent {
         return Err(format!(
             "{} requests unanswered or wrong under the flood\n{report}",
-            sent - answered
+            seen.sent - seen.answered
         ));
     }
     if lost != 0 {
         return Err(format!("{lost} received bytes lost\n{report}"));
     }
-    if bytes < u64::from(sent) * 8 {
+    if bytes < u64::from(seen.sent) * 8 {
+        let sent = seen.sent;
         return Err(format!("the firmware counted {bytes} bytes received, fewer than the {sent} requests hold\n{report}"));
     }
+    let (status_and, status_or) = (seen.status_and, seen.status_or);
     if status_and & 0b1000 == 0 || status_or & 0b100_0000 != 0 {
         return Err(format!("the VFD link failed during the flood (status seen: and {status_and:#06b}, or {status_or:#09b})\n{report}"));
     }
-    if !icount && rate.abs() > 0.01 {
+    if !seen.icount && seen.rate.abs() > 0.01 {
         return Err(format!("the loop's rate depends on the flood\n{report}"));
     }
     Ok(report)
