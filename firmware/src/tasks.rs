@@ -1,0 +1,372 @@
+//! The bodies of the RTIC tasks both boards declare, and the channels between them. RTIC 2
+//! wants each task declared in the board's app (its binding, priority and resources); its
+//! body is one call into here:
+//!
+//! | task | body |
+//! |---|---|
+//! | control (priority 3), after each step | [`StepLinks::after_step`] |
+//! | VFD master (priority 2) | [`vfd_pass`] on each [`VfdRequest`] |
+//! | SCADA server (priority 1) | [`crate::port::serve_scada`] on each wake-up |
+//! | log (priority 1) | [`log`] on each [`LogMsg`] |
+//!
+//! A board keeps one [`Wiring`] among its `init` locals (a `'static`) and hands the ends
+//! [`Wiring::split`] gives to the tasks.
+
+use crate::{record_max, Margin};
+use controller::control::{LogLine, Outputs, VfdStatus};
+use controller::link::{VfdLink, VfdPort};
+use controller::scada::Published;
+use core::sync::atomic::Ordering;
+use rtic_sync::channel::{Channel, Receiver, Sender};
+use rtic_sync::signal::{Signal, SignalReader, SignalWriter};
+
+/// Messages the log channel holds (4 s of once-a-second lines).
+pub const LOG_CAP: usize = 4;
+
+/// What the control task asks of the VFD master after a step.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct VfdRequest {
+    /// The step's time, ms (wrapping).
+    pub t_ms: u32,
+    /// The requested torque reference, % (0..=100; the link sends 0 % during its alarm).
+    pub torque_pct: f32,
+}
+
+/// What the log task writes.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum LogMsg {
+    /// The once-a-second line (the margins follow it).
+    Line(LogLine),
+    /// An error, logged as it is.
+    Error(&'static str),
+    /// The end of the run: the totals are logged and [`log`] returns whether it passed.
+    Done {
+        /// The run failed (e.g. the virtual bench diverged).
+        failed: bool,
+    },
+}
+
+/// Wakes the SCADA server (after a step, or from a port's interrupt when a frame may be
+/// complete).
+pub type ScadaWake = Sender<'static, (), 1>;
+/// The SCADA server's wake-ups.
+pub type ScadaWait = Receiver<'static, (), 1>;
+/// The VFD master's requests (latest only).
+pub type VfdWait = SignalReader<'static, VfdRequest>;
+/// The log task's messages.
+pub type LogWait = Receiver<'static, LogMsg, LOG_CAP>;
+
+/// The channels between the tasks: the SCADA server's wake-up, the VFD master's request, the
+/// log's messages.
+pub struct Wiring {
+    scada: Channel<(), 1>,
+    vfd: Signal<VfdRequest>,
+    log: Channel<LogMsg, LOG_CAP>,
+}
+
+impl Default for Wiring {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// The ends of a [`Wiring`], one field a task (or two).
+pub struct Links {
+    /// The control task's.
+    pub step: StepLinks,
+    /// A second SCADA wake-up, for an interrupt handler that sees a frame end.
+    pub scada_wake: ScadaWake,
+    /// The SCADA server's.
+    pub scada_wait: ScadaWait,
+    /// The VFD master's.
+    pub vfd_wait: VfdWait,
+    /// The log task's.
+    pub log_wait: LogWait,
+}
+
+impl Wiring {
+    /// Empty channels (a `const`, for an RTIC `init` local).
+    pub const fn new() -> Self {
+        Self {
+            scada: Channel::new(),
+            vfd: Signal::new(),
+            log: Channel::new(),
+        }
+    }
+
+    /// The ends, once (a second split of the same wiring panics: the VFD request has one
+    /// reader).
+    pub fn split(&'static mut self) -> Links {
+        let Self { scada, vfd, log } = self;
+        let (scada_wake, scada_wait) = scada.split();
+        let (vfd_req, vfd_wait) = vfd.split();
+        let (log_tx, log_wait) = log.split();
+        Links {
+            step: StepLinks {
+                vfd: vfd_req,
+                scada_wake: scada_wake.clone(),
+                log: log_tx,
+            },
+            scada_wake,
+            scada_wait,
+            vfd_wait,
+            log_wait,
+        }
+    }
+}
+
+/// The control task's ends of the links: what it leaves the other tasks, never waiting.
+pub struct StepLinks {
+    vfd: SignalWriter<'static, VfdRequest>,
+    scada_wake: ScadaWake,
+    log: Sender<'static, LogMsg, LOG_CAP>,
+}
+
+impl StepLinks {
+    /// What a control step leaves behind, in this order: `out`'s published values to
+    /// `publish` (the board's shared resource), the VFD master's request (latest only: when
+    /// several late steps run at once, the master's next pass takes the last one's request
+    /// and time), the SCADA server woken (its answers read the values just published), the
+    /// step counted in [`Margin::steps`], and the once-a-second line queued for the log task
+    /// (dropped with a warning if the log task is [`LOG_CAP`] lines behind).
+    #[inline]
+    pub fn after_step(&mut self, out: &Outputs, margin: &Margin, publish: impl FnOnce(&Published)) {
+        publish(&out.published);
+        self.vfd.write(VfdRequest {
+            t_ms: out.t_ms,
+            torque_pct: out.requested_torque_pct,
+        });
+        let _ = self.scada_wake.try_send(());
+        margin.steps.fetch_add(1, Ordering::Relaxed);
+        if let Some(line) = out.log {
+            if self.log.try_send(LogMsg::Line(line)).is_err() {
+                #[cfg(feature = "defmt")]
+                defmt::warn!("log line dropped (log task behind)");
+            }
+        }
+    }
+
+    /// Queues `msg` for the log task; `false` if the log task is [`LOG_CAP`] messages
+    /// behind (dropped).
+    pub fn log(&mut self, msg: LogMsg) -> bool {
+        self.log.try_send(msg).is_ok()
+    }
+}
+
+/// The VFD master's pass for request `r`: `link` polled at the step's time over `port` (the
+/// board's serial [`crate::port::PortTask`], stamped with the time, or an in-process drive),
+/// and the link's status for the control task.
+#[inline]
+pub fn vfd_pass(link: &mut VfdLink, port: &mut impl VfdPort, r: VfdRequest) -> VfdStatus {
+    link.poll(r.t_ms, r.torque_pct, port);
+    link.status()
+}
+
+/// The log task's work on `msg`, with `clock` the board's margin timer (the margins' unit):
+/// - a line: written, its write timed as the longest masked section (the logger masks
+///   interrupts while it copies a frame, [`Margin::masked_max`]), then the margins as
+///   `margin: steps=… control_max=… usart_max=… masked_max=… rx_wait_bound=… bytes=… lost=…`
+///   (`cargo xtask flood` reads it);
+/// - an error: written as it is;
+/// - the end of the run: `done: steps=… control_max=… rx_wait_bound=… lost=…`, and
+///   `Some(passed)`: not failed and no received byte lost (the board then exits).
+///
+/// `None` but at the end. Without the `defmt` feature nothing is written (the margins are
+/// still measured).
+pub fn log(msg: LogMsg, margin: &Margin, clock: impl Fn() -> u32) -> Option<bool> {
+    match msg {
+        LogMsg::Line(line) => {
+            let t0 = clock();
+            #[cfg(feature = "defmt")]
+            defmt::info!("{}", line);
+            #[cfg(not(feature = "defmt"))]
+            let _ = line;
+            record_max(&margin.masked_max, clock().wrapping_sub(t0));
+            #[cfg(feature = "defmt")]
+            {
+                let m = margin.snapshot();
+                defmt::info!(
+                    "margin: steps={=u32} control_max={=u32} usart_max={=u32} masked_max={=u32} rx_wait_bound={=u32} bytes={=u32} lost={=u32}",
+                    m.steps,
+                    m.control_max,
+                    m.usart_handler_max,
+                    m.masked_max,
+                    m.rx_wait_bound(),
+                    m.bytes_received,
+                    m.bytes_lost
+                );
+            }
+            None
+        }
+        LogMsg::Error(_what) => {
+            #[cfg(feature = "defmt")]
+            defmt::error!("{=str}", _what);
+            None
+        }
+        LogMsg::Done { failed } => {
+            let m = margin.snapshot();
+            #[cfg(feature = "defmt")]
+            defmt::info!(
+                "done: steps={=u32} control_max={=u32} rx_wait_bound={=u32} lost={=u32}",
+                m.steps,
+                m.control_max,
+                m.rx_wait_bound(),
+                m.bytes_lost
+            );
+            Some(!failed && m.bytes_lost == 0)
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use controller::bench::{VirtualBench, VirtualBenchConfig, VirtualIo};
+    use controller::control::Config;
+    use controller::scada::{Arithmetic, Mode};
+    use std::boxed::Box;
+    use std::cell::Cell;
+
+    fn links() -> Links {
+        Box::leak(Box::new(Wiring::new())).split()
+    }
+
+    fn outputs(t_ms: u32, log: bool) -> Outputs {
+        let published = Published {
+            torque_pct: t_ms as f32 / 10.0,
+            ..Published::default()
+        };
+        Outputs {
+            t_ms,
+            torque_ref_pct: 12.5,
+            requested_torque_pct: t_ms as f32 / 100.0,
+            bench: None,
+            published,
+            log: log.then_some(LogLine {
+                t_ms,
+                mode: Mode::Manual,
+                arithmetic: Arithmetic::F32,
+                values: published,
+            }),
+        }
+    }
+
+    #[test]
+    fn after_a_step_each_task_gets_its_share() {
+        let mut l = links();
+        let margin = Margin::new();
+        let mut published = Published::default();
+        let out = outputs(7, true);
+        l.step.after_step(&out, &margin, |p| published = *p);
+        assert_eq!(published, out.published);
+        assert_eq!(
+            l.vfd_wait.try_read(),
+            Some(VfdRequest {
+                t_ms: 7,
+                torque_pct: 0.07
+            })
+        );
+        assert!(l.scada_wait.try_recv().is_ok());
+        assert!(l.scada_wait.try_recv().is_err(), "one wake-up");
+        assert_eq!(margin.snapshot().steps, 1);
+        assert_eq!(
+            l.log_wait.try_recv().ok(),
+            Some(LogMsg::Line(out.log.unwrap()))
+        );
+        assert!(l.log_wait.try_recv().is_err());
+    }
+
+    #[test]
+    fn the_vfd_master_takes_the_last_request_and_wake_ups_merge() {
+        let mut l = links();
+        let margin = Margin::new();
+        for t in 1..=5 {
+            l.step.after_step(&outputs(t, false), &margin, |_| {});
+        }
+        assert_eq!(margin.snapshot().steps, 5);
+        assert_eq!(l.vfd_wait.try_read().map(|r| r.t_ms), Some(5));
+        assert_eq!(l.vfd_wait.try_read(), None, "read once");
+        assert!(l.scada_wait.try_recv().is_ok());
+        assert!(l.scada_wait.try_recv().is_err(), "wake-ups merge");
+        assert!(l.log_wait.try_recv().is_err(), "no line without one");
+        // The interrupts' wake-up reaches the same server.
+        assert!(l.scada_wake.try_send(()).is_ok());
+        assert!(l.scada_wait.try_recv().is_ok());
+    }
+
+    #[test]
+    fn a_log_task_behind_loses_lines_not_steps() {
+        let mut l = links();
+        let margin = Margin::new();
+        let n = LOG_CAP as u32 + 3;
+        for t in 0..n {
+            l.step.after_step(&outputs(t, true), &margin, |_| {});
+        }
+        assert_eq!(margin.snapshot().steps, n);
+        for t in 0..LOG_CAP as u32 {
+            match l.log_wait.try_recv() {
+                Ok(LogMsg::Line(line)) => assert_eq!(line.t_ms, t),
+                other => panic!("line {t}: {other:?}"),
+            }
+        }
+        assert!(l.log_wait.try_recv().is_err(), "the later lines dropped");
+        assert!(l.step.log(LogMsg::Error("e")));
+        assert_eq!(l.log_wait.try_recv().ok(), Some(LogMsg::Error("e")));
+    }
+
+    #[test]
+    fn the_log_times_the_write_and_tells_the_end() {
+        let margin = Margin::new();
+        let t = Cell::new(0u32);
+        // Each reading of the clock advances it by 7 counts: a line's write takes 7.
+        let clock = || {
+            t.set(t.get().wrapping_add(7));
+            t.get()
+        };
+        let line = outputs(1000, true).log.unwrap();
+        assert_eq!(log(LogMsg::Line(line), &margin, clock), None);
+        assert_eq!(margin.snapshot().masked_max, 7);
+        t.set(u32::MAX - 3); // the timer wraps during the write
+        assert_eq!(log(LogMsg::Line(line), &margin, clock), None);
+        assert_eq!(margin.snapshot().masked_max, 7);
+        assert_eq!(log(LogMsg::Error("x"), &margin, clock), None);
+        assert_eq!(
+            log(LogMsg::Done { failed: false }, &margin, clock),
+            Some(true)
+        );
+        assert_eq!(
+            log(LogMsg::Done { failed: true }, &margin, clock),
+            Some(false)
+        );
+        margin.bytes_lost.fetch_add(1, Ordering::Relaxed);
+        assert_eq!(
+            log(LogMsg::Done { failed: false }, &margin, clock),
+            Some(false)
+        );
+    }
+
+    /// The VFD master on the virtual bench's in-process drive: the link alarm clears once
+    /// the drive answers, and each pass reports the link's status.
+    #[test]
+    fn vfd_passes_bring_the_link_up() {
+        let config = Config::bench();
+        let mut link = VfdLink::new(config.vfd).unwrap();
+        let bench = VirtualBench::new(VirtualBenchConfig::default_offsets(1)).unwrap();
+        let mut io = VirtualIo::new(bench, config.vfd).unwrap();
+        let mut status = VfdStatus::START;
+        for t_ms in 0..2000 {
+            status = vfd_pass(
+                &mut link,
+                &mut io,
+                VfdRequest {
+                    t_ms,
+                    torque_pct: 30.0,
+                },
+            );
+            assert_eq!(status, link.status());
+        }
+        assert!(!status.link_alarm, "{status:?}");
+        assert!(status.reads_ok > 0);
+        assert!(status.readings.is_some());
+    }
+}
