@@ -41,20 +41,6 @@ use stm32f4xx_hal::pac;
 /// The timing margins of this run (TIM2 counts: instructions under `-icount shift=0`).
 static MARGIN: firmware::Margin = firmware::Margin::new();
 
-/// What the control task asks of the VFD task after a step.
-#[derive(Clone, Copy)]
-struct Request {
-    t_ms: u32,
-    torque_pct: f32,
-}
-
-/// What the log task writes.
-enum LogMsg {
-    Line(controller::control::LogLine),
-    Error(&'static str),
-    Done { failed: bool },
-}
-
 #[rtic::app(device = stm32f4xx_hal::pac, peripherals = true, dispatchers = [EXTI0, EXTI1, EXTI2])]
 mod app {
     use super::*;
@@ -65,11 +51,11 @@ mod app {
     use controller::rtu::{NoDe, Rs485};
     use controller::scada::Published;
     use firmware::port::{PortIsr, PortTask, RX_QUEUE, TX_QUEUE};
+    use firmware::tasks::{
+        vfd_pass, LogMsg, LogWait, ScadaWait, ScadaWake, StepLinks, VfdWait, Wiring,
+    };
     use firmware::{record_max, Core};
     use heapless::spsc::Queue;
-    use rtic_sync::channel::{Receiver, Sender};
-    use rtic_sync::signal::{SignalReader, SignalWriter};
-    use rtic_sync::{make_channel, make_signal};
     use stm32f4xx_hal::prelude::*;
     use stm32f4xx_hal::rcc::Config as RccConfig;
     use stm32f4xx_hal::serial::{Rx, Serial, Tx};
@@ -82,7 +68,6 @@ mod app {
     >;
     type Port1 = PortIsr<Tx<pac::USART1>, Rx<pac::USART1>, NoDe>;
     type Port2 = PortIsr<Tx<pac::USART2>, Rx<pac::USART2>, NoDe>;
-    const LOG_CAP: usize = 4;
 
     #[shared]
     struct Shared {
@@ -108,13 +93,11 @@ mod app {
         vfd_port: Option<PortTask>,
         scada: ScadaLink,
         vfd: VfdLink,
-        scada_wake: Sender<'static, (), 1>,
-        scada_wake_isr: Sender<'static, (), 1>,
-        scada_rx: Receiver<'static, (), 1>,
-        vfd_req: SignalWriter<'static, Request>,
-        vfd_wait: SignalReader<'static, Request>,
-        log_tx: Sender<'static, LogMsg, LOG_CAP>,
-        log_rx: Receiver<'static, LogMsg, LOG_CAP>,
+        step: StepLinks,
+        scada_wake_isr: ScadaWake,
+        scada_wait: ScadaWait,
+        vfd_wait: VfdWait,
+        log_wait: LogWait,
     }
 
     #[init(local = [
@@ -122,6 +105,7 @@ mod app {
         tx1: Queue<Frame, TX_QUEUE> = Queue::new(),
         rx2: Queue<u16, RX_QUEUE> = Queue::new(),
         tx2: Queue<Frame, TX_QUEUE> = Queue::new(),
+        wiring: Wiring = Wiring::new(),
     ])]
     fn init(cx: init::Context) -> (Shared, Local) {
         let mut buf = [0u8; 256];
@@ -192,9 +176,7 @@ mod app {
         syst.enable_interrupt();
         syst.enable_counter();
 
-        let (scada_wake, scada_rx) = make_channel!((), 1);
-        let (vfd_req, vfd_wait) = make_signal!(Request);
-        let (log_tx, log_rx) = make_channel!(LogMsg, LOG_CAP);
+        let links = cx.local.wiring.split();
         defmt::info!(
             "firmware: virtual bench, SCADA unit 1 on USART1, VFD {=str}, mode={=u8} setpoint={=u16} seed={=u32} narmax={=str}{=str}",
             if a.vfd_uart { "on USART2" } else { "virtual" },
@@ -225,13 +207,11 @@ mod app {
                 vfd_port,
                 scada,
                 vfd,
-                scada_wake_isr: scada_wake.clone(),
-                scada_wake,
-                scada_rx,
-                vfd_req,
-                vfd_wait,
-                log_tx,
-                log_rx,
+                step: links.step,
+                scada_wake_isr: links.scada_wake,
+                scada_wait: links.scada_wait,
+                vfd_wait: links.vfd_wait,
+                log_wait: links.log_wait,
             },
         )
     }
@@ -264,7 +244,7 @@ mod app {
     /// Every elapsed millisecond of TIM5: one controller step, its outputs to the virtual
     /// bench, the bench stepped; then the links are woken with what the step left them.
     #[task(binds = SysTick, priority = 3,
-           local = [core, ms, run_ms, stopped, vfd_req, log_tx, scada_wake],
+           local = [core, ms, run_ms, stopped, step],
            shared = [io, commands, published, vfd_status])]
     fn control(mut cx: control::Context) {
         let t0 = now_ns();
@@ -278,32 +258,21 @@ mod app {
                 Virtual::control(core, io, &inputs)
             });
             let Ok(out) = out else {
-                let _ = cx
-                    .local
-                    .log_tx
-                    .try_send(LogMsg::Error("the virtual bench diverged"));
-                let _ = cx.local.log_tx.try_send(LogMsg::Done { failed: true });
+                cx.local
+                    .step
+                    .log(LogMsg::Error("the virtual bench diverged"));
+                cx.local.step.log(LogMsg::Done { failed: true });
                 *cx.local.stopped = true;
                 break;
             };
-            cx.shared.published.lock(|p| *p = out.published);
-            // Latest only: when QEMU catches up several late steps in one run of this task,
-            // the VFD master's next pass takes the last step's request and time.
-            cx.local.vfd_req.write(Request {
-                t_ms: out.t_ms,
-                torque_pct: out.requested_torque_pct,
-            });
-            let _ = cx.local.scada_wake.try_send(());
-            MARGIN
-                .steps
-                .fetch_add(1, core::sync::atomic::Ordering::Relaxed);
-            if let Some(line) = out.log {
-                if cx.local.log_tx.try_send(LogMsg::Line(line)).is_err() {
-                    defmt::warn!("log line dropped (log task behind)");
-                }
-            }
+            // When QEMU catches up several late steps in one run of this task, the VFD
+            // master's next pass takes the last one's request and time.
+            let published = &mut cx.shared.published;
+            cx.local
+                .step
+                .after_step(&out, &MARGIN, |p| published.lock(|x| *x = *p));
             if cx.local.run_ms.is_some_and(|end| out.t_ms + 1 >= end) {
-                let _ = cx.local.log_tx.try_send(LogMsg::Done { failed: false });
+                cx.local.step.log(LogMsg::Done { failed: false });
                 *cx.local.stopped = true;
             }
         }
@@ -311,23 +280,17 @@ mod app {
     }
 
     /// The SCADA server: requests from USART1's queue, answers back to it.
-    #[task(priority = 1, local = [scada, scada_port, scada_rx], shared = [commands, published])]
+    #[task(priority = 1, local = [scada, scada_port, scada_wait], shared = [commands, published])]
     async fn scada(cx: scada::Context) {
         let (mut published, mut commands) = (cx.shared.published, cx.shared.commands);
-        while cx.local.scada_rx.recv().await.is_ok() {
-            let dropped = firmware::port::serve_scada(
+        while cx.local.scada_wait.recv().await.is_ok() {
+            firmware::port::serve_scada(
                 cx.local.scada_port,
                 cx.local.scada,
                 now_us(),
                 || published.lock(|p| *p),
                 |c| commands.lock(|x| *x = c),
             );
-            if dropped > 0 {
-                defmt::warn!(
-                    "{=u32} SCADA answers dropped (transmit queue full)",
-                    dropped
-                );
-            }
         }
     }
 
@@ -338,51 +301,20 @@ mod app {
         loop {
             let r = cx.local.vfd_wait.wait().await;
             let link = &mut *cx.local.vfd;
-            match cx.local.vfd_port {
-                Some(port) => {
-                    port.now_us = now_us();
-                    link.poll(r.t_ms, r.torque_pct, port);
-                }
-                None => cx.shared.io.lock(|io| link.poll(r.t_ms, r.torque_pct, io)),
-            }
-            let s = link.status();
+            let s = match cx.local.vfd_port {
+                Some(port) => vfd_pass(link, port.at(now_us()), r),
+                None => cx.shared.io.lock(|io| vfd_pass(link, io, r)),
+            };
             cx.shared.vfd_status.lock(|x| *x = s);
         }
     }
 
     /// The log: the once-a-second line, the margins, errors; the exit at the end of `run_ms`.
-    #[task(priority = 1, local = [log_rx])]
+    #[task(priority = 1, local = [log_wait])]
     async fn log(cx: log::Context) {
-        while let Ok(msg) = cx.local.log_rx.recv().await {
-            match msg {
-                LogMsg::Line(line) => {
-                    let t0 = now_ns();
-                    defmt::info!("{}", line);
-                    record_max(&MARGIN.masked_max, now_ns().wrapping_sub(t0));
-                    let m = MARGIN.snapshot();
-                    defmt::info!(
-                        "margin: steps={=u32} control_max={=u32} usart_max={=u32} masked_max={=u32} rx_wait_bound={=u32} bytes={=u32} lost={=u32}",
-                        m.steps,
-                        m.control_max,
-                        m.usart_handler_max,
-                        m.masked_max,
-                        m.rx_wait_bound(),
-                        m.bytes_received,
-                        m.bytes_lost
-                    );
-                }
-                LogMsg::Error(what) => defmt::error!("{=str}", what),
-                LogMsg::Done { failed } => {
-                    let m = MARGIN.snapshot();
-                    defmt::info!(
-                        "done: steps={=u32} control_max={=u32} rx_wait_bound={=u32} lost={=u32}",
-                        m.steps,
-                        m.control_max,
-                        m.rx_wait_bound(),
-                        m.bytes_lost
-                    );
-                    exit(!failed && m.bytes_lost == 0);
-                }
+        while let Ok(msg) = cx.local.log_wait.recv().await {
+            if let Some(passed) = firmware::tasks::log(msg, &MARGIN, now_ns) {
+                exit(passed);
             }
         }
     }
