@@ -52,10 +52,11 @@ mod app {
     use controller::scada::Published;
     use firmware::port::{PortIsr, PortTask, RX_QUEUE, TX_QUEUE};
     use firmware::tasks::{
-        vfd_pass, LogMsg, LogWait, ScadaWait, ScadaWake, StepLinks, VfdWait, Wiring,
+        vfd_pass, LogMsg, LogWait, ScadaWait, ScadaWake, StepLinks, VfdRequest, VfdWait, LOG_CAP,
     };
     use firmware::{record_max, Core};
     use heapless::spsc::Queue;
+    use rtic_sync::{make_channel, make_signal};
     use stm32f4xx_hal::prelude::*;
     use stm32f4xx_hal::rcc::Config as RccConfig;
     use stm32f4xx_hal::serial::{Rx, Serial, Tx};
@@ -105,7 +106,6 @@ mod app {
         tx1: Queue<Frame, TX_QUEUE> = Queue::new(),
         rx2: Queue<u16, RX_QUEUE> = Queue::new(),
         tx2: Queue<Frame, TX_QUEUE> = Queue::new(),
-        wiring: Wiring = Wiring::new(),
     ])]
     fn init(cx: init::Context) -> (Shared, Local) {
         let mut buf = [0u8; 256];
@@ -176,7 +176,9 @@ mod app {
         syst.enable_interrupt();
         syst.enable_counter();
 
-        let links = cx.local.wiring.split();
+        let (vfd_send, vfd_wait) = make_signal!(VfdRequest);
+        let (scada_wake, scada_wait) = make_channel!((), 1);
+        let (log_send, log_wait) = make_channel!(LogMsg, LOG_CAP);
         defmt::info!(
             "firmware: virtual bench, SCADA unit 1 on USART1, VFD {=str}, mode={=u8} setpoint={=u16} seed={=u32} narmax={=str}{=str}",
             if a.vfd_uart { "on USART2" } else { "virtual" },
@@ -207,11 +209,11 @@ mod app {
                 vfd_port,
                 scada,
                 vfd,
-                step: links.step,
-                scada_wake_isr: links.scada_wake,
-                scada_wait: links.scada_wait,
-                vfd_wait: links.vfd_wait,
-                log_wait: links.log_wait,
+                scada_wake_isr: scada_wake.clone(),
+                step: StepLinks::new(vfd_send, scada_wake, log_send),
+                scada_wait,
+                vfd_wait,
+                log_wait,
             },
         )
     }
@@ -250,6 +252,7 @@ mod app {
         let t0 = now_ns();
         let now = cx.local.ms.now_ms(now_us());
         let core = cx.local.core;
+        let links = cx.local.step;
         while !*cx.local.stopped && now.wrapping_sub(core.now_ms()) as i32 >= 0 {
             let commands = cx.shared.commands.lock(|c| *c);
             let vfd = cx.shared.vfd_status.lock(|s| *s);
@@ -258,21 +261,17 @@ mod app {
                 Virtual::control(core, io, &inputs)
             });
             let Ok(out) = out else {
-                cx.local
-                    .step
-                    .log(LogMsg::Error("the virtual bench diverged"));
-                cx.local.step.log(LogMsg::Done { failed: true });
+                links.log(LogMsg::Error("the virtual bench diverged"));
+                links.log(LogMsg::Done { failed: true });
                 *cx.local.stopped = true;
                 break;
             };
             // When QEMU catches up several late steps in one run of this task, the VFD
             // master's next pass takes the last one's request and time.
             let published = &mut cx.shared.published;
-            cx.local
-                .step
-                .after_step(&out, &MARGIN, |p| published.lock(|x| *x = *p));
+            links.after_step(&out, &MARGIN, |p| published.lock(|x| *x = *p));
             if cx.local.run_ms.is_some_and(|end| out.t_ms + 1 >= end) {
-                cx.local.step.log(LogMsg::Done { failed: false });
+                links.log(LogMsg::Done { failed: false });
                 *cx.local.stopped = true;
             }
         }
