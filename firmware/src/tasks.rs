@@ -5,9 +5,9 @@
 //! | task | body |
 //! |---|---|
 //! | control (priority 3), after each step | [`StepLinks::after_step`] |
-//! | VFD master (priority 2) | [`vfd_pass`] on each [`VfdRequest`] |
-//! | SCADA server (priority 1) | [`crate::port::serve_scada`] on each wake-up |
-//! | log (priority 1) | [`log`] on each [`LogMsg`] |
+//! | VFD master (priority 2) | [`vfd_master`]: [`vfd_pass`] on each [`VfdRequest`] |
+//! | SCADA server (priority 1) | [`scada_server`]: [`crate::port::serve_scada`] on each wake-up |
+//! | log (priority 1) | [`log_task`]: [`log`] on each [`LogMsg`] |
 //!
 //! A board makes the channels in its `init` with rtic-sync's `make_channel!` and
 //! `make_signal!` (of [`VfdRequest`], `((), 1)` and `(LogMsg, LOG_CAP)`): statics, whose
@@ -15,11 +15,13 @@
 //! instructions more per control step). The control task keeps its three ends as one
 //! [`StepLinks`].
 
+use crate::port::{serve_scada, PortTask};
 use crate::{record_max, Margin};
-use controller::control::{LogLine, Outputs, VfdStatus};
-use controller::link::{VfdLink, VfdPort};
+use controller::control::{Commands, LogLine, Outputs, VfdStatus};
+use controller::link::{ScadaLink, VfdLink, VfdPort};
 use controller::scada::Published;
 use core::sync::atomic::Ordering;
+use rtic_core::Mutex;
 use rtic_sync::channel::{Receiver, Sender};
 use rtic_sync::signal::{SignalReader, SignalWriter};
 
@@ -121,6 +123,55 @@ pub fn vfd_pass(link: &mut VfdLink, port: &mut impl VfdPort, r: VfdRequest) -> V
     link.status()
 }
 
+/// The VFD master task: on each request (waiting for the next; after several steps at once,
+/// the last one's), `pass` (e.g. [`vfd_pass`] over the board's port) and its status into
+/// `status`, the control task's copy. Never returns.
+pub async fn vfd_master(
+    wait: &mut VfdWait,
+    mut pass: impl FnMut(VfdRequest) -> VfdStatus,
+    mut status: impl Mutex<T = VfdStatus>,
+) -> ! {
+    loop {
+        let r = wait.wait().await;
+        let s = pass(r);
+        status.lock(|x| *x = s);
+    }
+}
+
+/// The SCADA server task: on each wake-up, every complete request on `port` answered
+/// ([`serve_scada`] at `now_us()`, the values from `published`, the holding registers into
+/// `commands`). Returns only when every wake-up's sender is gone (never on a board).
+pub async fn scada_server(
+    wait: &mut ScadaWait,
+    port: &mut PortTask,
+    link: &mut ScadaLink,
+    now_us: impl Fn() -> u32,
+    mut published: impl Mutex<T = Published>,
+    mut commands: impl Mutex<T = Commands>,
+) {
+    while wait.recv().await.is_ok() {
+        serve_scada(
+            port,
+            link,
+            now_us(),
+            || published.lock(|p| *p),
+            |c| commands.lock(|x| *x = c),
+        );
+    }
+}
+
+/// The log task: each message written by [`log`] until the end of the run, then whether it
+/// passed (the QEMU board exits with it); `false` if every sender is gone first. On a board
+/// whose run does not end, it never returns.
+pub async fn log_task(wait: &mut LogWait, margin: &Margin, clock: impl Fn() -> u32) -> bool {
+    while let Ok(msg) = wait.recv().await {
+        if let Some(passed) = log(msg, margin, &clock) {
+            return passed;
+        }
+    }
+    false
+}
+
 /// The log task's work on `msg`, with `clock` the board's margin timer (the margins' unit):
 /// - a line: written, its write timed as the longest masked section (the logger masks
 ///   interrupts while it copies a frame, [`Margin::masked_max`]), then the margins as
@@ -132,6 +183,7 @@ pub fn vfd_pass(link: &mut VfdLink, port: &mut impl VfdPort, r: VfdRequest) -> V
 ///
 /// `None` but at the end. Without the `defmt` feature nothing is written (the margins are
 /// still measured).
+#[inline(always)]
 pub fn log(msg: LogMsg, margin: &Margin, clock: impl Fn() -> u32) -> Option<bool> {
     match msg {
         LogMsg::Line(line) => {
@@ -183,6 +235,10 @@ mod tests {
     use controller::bench::{VirtualBench, VirtualBenchConfig, VirtualIo};
     use controller::control::Config;
     use controller::scada::{Arithmetic, Mode};
+    use core::future::Future;
+    use core::pin::pin;
+    use core::task::{Context, Poll, Waker};
+    use rtic_core::Exclusive;
     use rtic_sync::channel::Channel;
     use rtic_sync::signal::Signal;
     use std::boxed::Box;
@@ -348,5 +404,115 @@ mod tests {
         assert!(!status.link_alarm, "{status:?}");
         assert!(status.reads_ok > 0);
         assert!(status.readings.is_some());
+    }
+
+    /// Polls `f` once (the channels here never need a wake-up: what a test sends is there).
+    fn poll_once<F: Future>(f: F) -> Poll<F::Output> {
+        pin!(f)
+            .as_mut()
+            .poll(&mut Context::from_waker(Waker::noop()))
+    }
+
+    #[test]
+    fn the_vfd_master_task_passes_each_request_and_publishes_the_status() {
+        let mut l = links();
+        let margin = Margin::new();
+        let mut status = VfdStatus::START;
+        let mut seen = std::vec::Vec::new();
+        for t in [3, 4] {
+            l.step.after_step(&outputs(t, false), &margin, |_| {});
+        }
+        let task = vfd_master(
+            &mut l.vfd_wait,
+            |r| {
+                seen.push(r.t_ms);
+                VfdStatus {
+                    reads_ok: r.t_ms,
+                    ..VfdStatus::START
+                }
+            },
+            Exclusive(&mut status),
+        );
+        assert!(
+            poll_once(task).is_pending(),
+            "it waits for the next request"
+        );
+        assert_eq!(seen, [4], "only the latest request");
+        assert_eq!(status.reads_ok, 4);
+    }
+
+    #[test]
+    fn the_scada_server_task_serves_each_wake_up_until_its_senders_are_gone() {
+        let config = controller::control::Config::bench();
+        let mut link = ScadaLink::new(&config).unwrap();
+        let rx: &'static mut heapless::spsc::Queue<u16, 64> =
+            Box::leak(Box::new(heapless::spsc::Queue::new()));
+        let tx: &'static mut heapless::spsc::Queue<controller::modbus::Frame, 3> =
+            Box::leak(Box::new(heapless::spsc::Queue::new()));
+        let ((mut rx_p, rx_c), (tx_p, mut tx_c)) = (rx.split(), tx.split());
+        let mut port = PortTask::new(rx_c, tx_p, 1000, None, || {});
+        // A request for the holding registers, ended by the gap mark.
+        let body = [config.scada_unit, 3, 0, 0, 0, 1];
+        let crc = controller::modbus::crc16(&body).to_le_bytes();
+        for &b in body.iter().chain(crc.iter()) {
+            rx_p.enqueue(u16::from(b)).unwrap();
+        }
+        rx_p.enqueue(crate::port::GAP).unwrap();
+        let Links {
+            step,
+            scada_wake_isr,
+            mut scada_wait,
+            ..
+        } = links();
+        let mut wake = scada_wake_isr;
+        wake.try_send(()).unwrap();
+        drop((step, wake));
+        let mut published = Published::default();
+        let mut commands = Commands {
+            setpoint: 1234,
+            ..link.commands()
+        };
+        let served = poll_once(scada_server(
+            &mut scada_wait,
+            &mut port,
+            &mut link,
+            || 77,
+            Exclusive(&mut published),
+            Exclusive(&mut commands),
+        ));
+        assert!(served.is_ready(), "no sender left: the task ends");
+        assert_eq!(port.now_us, 77);
+        let answer = tx_c.dequeue().expect("an answer");
+        assert_eq!(answer[..2], [config.scada_unit, 3]);
+        assert_eq!(commands, link.commands());
+    }
+
+    #[test]
+    fn the_log_task_ends_with_the_run() {
+        let mut l = links();
+        let margin = Margin::new();
+        let line = outputs(1000, true).log.unwrap();
+        assert!(l.step.log(LogMsg::Line(line)));
+        assert!(l.step.log(LogMsg::Done { failed: false }));
+        assert_eq!(
+            poll_once(log_task(&mut l.log_wait, &margin, || 0)),
+            Poll::Ready(true)
+        );
+        assert!(l.step.log(LogMsg::Done { failed: true }));
+        assert_eq!(
+            poll_once(log_task(&mut l.log_wait, &margin, || 0)),
+            Poll::Ready(false)
+        );
+        assert!(l.step.log(LogMsg::Error("still running")));
+        assert!(poll_once(log_task(&mut l.log_wait, &margin, || 0)).is_pending());
+        // Every sender gone before the end: not passed.
+        let Links {
+            step, mut log_wait, ..
+        } = l;
+        drop(step);
+        assert_eq!(
+            poll_once(log_task(&mut log_wait, &margin, || 0)),
+            Poll::Ready(false)
+        );
     }
 }

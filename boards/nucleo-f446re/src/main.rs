@@ -126,7 +126,8 @@ mod app {
     use firmware::dac::{torque_code, DAC12_FULL_SCALE};
     use firmware::port::{PortIsr, PortTask, RX_QUEUE, TX_QUEUE};
     use firmware::tasks::{
-        vfd_pass, LogMsg, LogWait, ScadaWait, ScadaWake, StepLinks, VfdRequest, VfdWait, LOG_CAP,
+        log_task, scada_server, vfd_master, vfd_pass, LogMsg, LogWait, ScadaWait, ScadaWake,
+        StepLinks, VfdRequest, VfdWait, LOG_CAP,
     };
     use firmware::{record_max, Core};
     use heapless::spsc::Queue;
@@ -467,34 +468,24 @@ mod app {
     /// The SCADA server.
     #[task(priority = 1, local = [scada, scada_port, scada_wait], shared = [commands, published])]
     async fn scada(cx: scada::Context) {
-        let (mut published, mut commands) = (cx.shared.published, cx.shared.commands);
-        while cx.local.scada_wait.recv().await.is_ok() {
-            firmware::port::serve_scada(
-                cx.local.scada_port,
-                cx.local.scada,
-                now_us(),
-                || published.lock(|p| *p),
-                |c| commands.lock(|x| *x = c),
-            );
-        }
+        let l = cx.local;
+        let (port, link) = (l.scada_port, l.scada);
+        let (published, commands) = (cx.shared.published, cx.shared.commands);
+        scada_server(l.scada_wait, port, link, now_us, published, commands).await
     }
 
     /// The VFD master: one pass after each control step, at its time (a latest-only signal).
     #[task(priority = 2, local = [vfd, vfd_port, vfd_wait], shared = [vfd_status])]
-    async fn vfd(mut cx: vfd::Context) {
-        loop {
-            let r = cx.local.vfd_wait.wait().await;
-            let s = vfd_pass(cx.local.vfd, cx.local.vfd_port.at(now_us()), r);
-            cx.shared.vfd_status.lock(|x| *x = s);
-        }
+    async fn vfd(cx: vfd::Context) {
+        let (link, port) = (cx.local.vfd, cx.local.vfd_port);
+        let pass = |r| vfd_pass(link, port.at(now_us()), r);
+        vfd_master(cx.local.vfd_wait, pass, cx.shared.vfd_status).await
     }
 
     /// The once-a-second line and the margins (DWT cycles at 180 MHz), over RTT. The run
-    /// never ends here: no `Done` is sent.
+    /// does not end here (no `Done` is sent).
     #[task(priority = 1, local = [log_wait])]
     async fn log(cx: log::Context) {
-        while let Ok(msg) = cx.local.log_wait.recv().await {
-            let _ = firmware::tasks::log(msg, &MARGIN, cycles);
-        }
+        log_task(cx.local.log_wait, &MARGIN, cycles).await;
     }
 }

@@ -52,7 +52,8 @@ mod app {
     use controller::scada::Published;
     use firmware::port::{PortIsr, PortTask, RX_QUEUE, TX_QUEUE};
     use firmware::tasks::{
-        vfd_pass, LogMsg, LogWait, ScadaWait, ScadaWake, StepLinks, VfdRequest, VfdWait, LOG_CAP,
+        log_task, scada_server, vfd_master, vfd_pass, LogMsg, LogWait, ScadaWait, ScadaWake,
+        StepLinks, VfdRequest, VfdWait, LOG_CAP,
     };
     use firmware::{record_max, Core};
     use heapless::spsc::Queue;
@@ -281,40 +282,28 @@ mod app {
     /// The SCADA server: requests from USART1's queue, answers back to it.
     #[task(priority = 1, local = [scada, scada_port, scada_wait], shared = [commands, published])]
     async fn scada(cx: scada::Context) {
-        let (mut published, mut commands) = (cx.shared.published, cx.shared.commands);
-        while cx.local.scada_wait.recv().await.is_ok() {
-            firmware::port::serve_scada(
-                cx.local.scada_port,
-                cx.local.scada,
-                now_us(),
-                || published.lock(|p| *p),
-                |c| commands.lock(|x| *x = c),
-            );
-        }
+        let l = cx.local;
+        let (port, link) = (l.scada_port, l.scada);
+        let (published, commands) = (cx.shared.published, cx.shared.commands);
+        scada_server(l.scada_wait, port, link, now_us, published, commands).await
     }
 
     /// The VFD master: one pass after each control step, at its time, with its request (a
-    /// latest-only signal: after steps caught up at once, the last one).
+    /// latest-only signal: after steps caught up at once, the last one); over USART2 or to
+    /// the in-process drive.
     #[task(priority = 2, local = [vfd, vfd_port, vfd_wait], shared = [io, vfd_status])]
-    async fn vfd(mut cx: vfd::Context) {
-        loop {
-            let r = cx.local.vfd_wait.wait().await;
-            let link = &mut *cx.local.vfd;
-            let s = match cx.local.vfd_port {
-                Some(port) => vfd_pass(link, port.at(now_us()), r),
-                None => cx.shared.io.lock(|io| vfd_pass(link, io, r)),
-            };
-            cx.shared.vfd_status.lock(|x| *x = s);
-        }
+    async fn vfd(cx: vfd::Context) {
+        let (link, port, mut io) = (cx.local.vfd, cx.local.vfd_port, cx.shared.io);
+        let pass = |r| match port {
+            Some(port) => vfd_pass(link, port.at(now_us()), r),
+            None => io.lock(|io| vfd_pass(link, io, r)),
+        };
+        vfd_master(cx.local.vfd_wait, pass, cx.shared.vfd_status).await
     }
 
     /// The log: the once-a-second line, the margins, errors; the exit at the end of `run_ms`.
     #[task(priority = 1, local = [log_wait])]
     async fn log(cx: log::Context) {
-        while let Ok(msg) = cx.local.log_wait.recv().await {
-            if let Some(passed) = firmware::tasks::log(msg, &MARGIN, now_ns) {
-                exit(passed);
-            }
-        }
+        exit(log_task(cx.local.log_wait, &MARGIN, now_ns).await)
     }
 }
