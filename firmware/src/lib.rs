@@ -56,6 +56,17 @@ pub mod selftest;
 pub mod semihosting;
 pub mod tasks;
 
+/// Starts SysTick from the core clock, interrupting every `reload + 1` core cycles (e.g.
+/// `core_hz / 1000 - 1` for 1 ms; `reload` 1..=0xFF_FFFF).
+#[cfg(target_os = "none")]
+pub fn start_systick(mut syst: cortex_m::peripheral::SYST, reload: u32) {
+    syst.set_clock_source(cortex_m::peripheral::syst::SystClkSource::Core);
+    syst.set_reload(reload);
+    syst.clear_current();
+    syst.enable_interrupt();
+    syst.enable_counter();
+}
+
 /// What [`hard_fault_trampoline!`] names in the board's crate.
 #[cfg(target_os = "none")]
 #[doc(hidden)]

@@ -9,11 +9,7 @@
 //! | SCADA server (priority 1) | [`scada_server`]: [`crate::port::serve_scada`] on each wake-up |
 //! | log (priority 1) | [`log_task`]: [`log`] on each [`LogMsg`] |
 //!
-//! A board makes the channels in its `init` with rtic-sync's `make_channel!` and
-//! `make_signal!` (of [`VfdRequest`], `((), 1)` and `(LogMsg, LOG_CAP)`): statics, whose
-//! addresses LTO folds into the code (the same channels as `init` locals measured 3 to 5
-//! instructions more per control step). The control task keeps its three ends as one
-//! [`StepLinks`].
+//! A board's `init` makes the channels once with [`links`] and hands each task its ends.
 
 use crate::port::{serve_scada, PortTask};
 use crate::{record_max, Margin};
@@ -64,6 +60,38 @@ pub type VfdWait = SignalReader<'static, VfdRequest>;
 pub type LogSend = Sender<'static, LogMsg, LOG_CAP>;
 /// The log task's messages.
 pub type LogWait = Receiver<'static, LogMsg, LOG_CAP>;
+
+/// The ends of the channels between the tasks, one field a task's resource.
+pub struct Links {
+    /// The control task's.
+    pub step: StepLinks,
+    /// A second SCADA wake-up, for an interrupt handler that sees a frame end.
+    pub scada_wake_isr: ScadaWake,
+    /// The SCADA server's.
+    pub scada_wait: ScadaWait,
+    /// The VFD master's.
+    pub vfd_wait: VfdWait,
+    /// The log task's.
+    pub log_wait: LogWait,
+}
+
+/// The channels between the tasks, made once (a board's `init` calls it; a second call
+/// panics). They are rtic-sync's `make_signal!` and `make_channel!` statics, whose addresses
+/// LTO folds into the code (the same channels as RTIC `init` locals measured 3 to 5
+/// instructions more per control step, as did this function not inlined into `init`).
+#[inline(always)]
+pub fn links() -> Links {
+    let (vfd_send, vfd_wait) = rtic_sync::make_signal!(VfdRequest);
+    let (scada_wake, scada_wait) = rtic_sync::make_channel!((), 1);
+    let (log_send, log_wait) = rtic_sync::make_channel!(LogMsg, LOG_CAP);
+    Links {
+        scada_wake_isr: scada_wake.clone(),
+        step: StepLinks::new(vfd_send, scada_wake, log_send),
+        scada_wait,
+        vfd_wait,
+        log_wait,
+    }
+}
 
 /// The control task's ends of the links: what it leaves the other tasks, never waiting.
 pub struct StepLinks {
@@ -244,16 +272,8 @@ mod tests {
     use std::boxed::Box;
     use std::cell::Cell;
 
-    /// The channels as a board makes them (leaked to `'static` instead of `make_channel!`'s
-    /// statics, so that each test has its own).
-    struct Links {
-        step: StepLinks,
-        vfd_wait: VfdWait,
-        scada_wake_isr: ScadaWake,
-        scada_wait: ScadaWait,
-        log_wait: LogWait,
-    }
-
+    /// The channels as [`super::links`] makes them, leaked to `'static` instead of its
+    /// statics, so that each test has its own.
     fn links() -> Links {
         let (vfd_send, vfd_wait) = Box::leak(Box::new(Signal::new())).split();
         let (scada_wake, scada_wait) = Box::leak(Box::new(Channel::new())).split();
@@ -514,5 +534,18 @@ mod tests {
             poll_once(log_task(&mut log_wait, &margin, || 0)),
             Poll::Ready(false)
         );
+    }
+
+    /// The one call of the real [`super::links`] in this process.
+    #[test]
+    fn the_boards_links_connect_the_tasks() {
+        let mut l = super::links();
+        let margin = Margin::new();
+        l.step.after_step(&outputs(9, true), &margin, |_| {});
+        assert_eq!(l.vfd_wait.try_read().map(|r| r.t_ms), Some(9));
+        assert!(l.scada_wait.try_recv().is_ok());
+        assert!(l.scada_wake_isr.try_send(()).is_ok());
+        assert!(l.scada_wait.try_recv().is_ok());
+        assert!(matches!(l.log_wait.try_recv(), Ok(LogMsg::Line(_))));
     }
 }

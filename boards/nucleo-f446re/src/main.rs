@@ -126,12 +126,11 @@ mod app {
     use firmware::dac::{torque_code, DAC12_FULL_SCALE};
     use firmware::port::{PortIsr, PortTask, RX_QUEUE, TX_QUEUE};
     use firmware::tasks::{
-        log_task, scada_server, vfd_master, vfd_pass, LogMsg, LogWait, ScadaWait, ScadaWake,
-        StepLinks, VfdRequest, VfdWait, LOG_CAP,
+        log_task, scada_server, vfd_master, vfd_pass, LogWait, ScadaWait, ScadaWake, StepLinks,
+        VfdWait,
     };
     use firmware::{record_max, Core};
     use heapless::spsc::Queue;
-    use rtic_sync::{make_channel, make_signal};
     use stm32f4xx_hal::{
         adc::{
             config::{AdcConfig, Clock, SampleTime},
@@ -298,16 +297,9 @@ mod app {
             rtic::pend(pac::Interrupt::USART6)
         });
 
-        let mut syst = cp.SYST;
-        syst.set_clock_source(cortex_m::peripheral::syst::SystClkSource::Core);
-        syst.set_reload(SYSCLK_HZ / 1000 - 1);
-        syst.clear_current();
-        syst.enable_interrupt();
-        syst.enable_counter();
+        firmware::start_systick(cp.SYST, SYSCLK_HZ / 1000 - 1);
 
-        let (vfd_send, vfd_wait) = make_signal!(VfdRequest);
-        let (scada_wake, scada_wait) = make_channel!((), 1);
-        let (log_send, log_wait) = make_channel!(LogMsg, LOG_CAP);
+        let links = firmware::tasks::links();
 
         // The watchdog last, so that a slow start-up cannot reset the board in a loop;
         // frozen while a debugger halts the core.
@@ -350,11 +342,11 @@ mod app {
                 vfd_port,
                 scada,
                 vfd,
-                scada_wake_gap: scada_wake.clone(),
-                step: StepLinks::new(vfd_send, scada_wake, log_send),
-                scada_wait,
-                vfd_wait,
-                log_wait,
+                step: links.step,
+                scada_wake_gap: links.scada_wake_isr,
+                scada_wait: links.scada_wait,
+                vfd_wait: links.vfd_wait,
+                log_wait: links.log_wait,
             },
         )
     }

@@ -53,11 +53,10 @@ mod app {
     use firmware::port::{PortIsr, PortTask, RX_QUEUE, TX_QUEUE};
     use firmware::tasks::{
         log_task, scada_server, vfd_master, vfd_pass, LogMsg, LogWait, ScadaWait, ScadaWake,
-        StepLinks, VfdRequest, VfdWait, LOG_CAP,
+        StepLinks, VfdWait,
     };
     use firmware::{record_max, Core};
     use heapless::spsc::Queue;
-    use rtic_sync::{make_channel, make_signal};
     use stm32f4xx_hal::prelude::*;
     use stm32f4xx_hal::rcc::Config as RccConfig;
     use stm32f4xx_hal::serial::{Rx, Serial, Tx};
@@ -170,16 +169,9 @@ mod app {
             })
         });
 
-        let mut syst = cx.core.SYST;
-        syst.set_clock_source(cortex_m::peripheral::syst::SystClkSource::Core);
-        syst.set_reload(QEMU_SYSTICK_HZ / WAKE_HZ - 1);
-        syst.clear_current();
-        syst.enable_interrupt();
-        syst.enable_counter();
+        firmware::start_systick(cx.core.SYST, QEMU_SYSTICK_HZ / WAKE_HZ - 1);
 
-        let (vfd_send, vfd_wait) = make_signal!(VfdRequest);
-        let (scada_wake, scada_wait) = make_channel!((), 1);
-        let (log_send, log_wait) = make_channel!(LogMsg, LOG_CAP);
+        let links = firmware::tasks::links();
         defmt::info!(
             "firmware: virtual bench, SCADA unit 1 on USART1, VFD {=str}, mode={=u8} setpoint={=u16} seed={=u32} narmax={=str}{=str}",
             if a.vfd_uart { "on USART2" } else { "virtual" },
@@ -210,11 +202,11 @@ mod app {
                 vfd_port,
                 scada,
                 vfd,
-                scada_wake_isr: scada_wake.clone(),
-                step: StepLinks::new(vfd_send, scada_wake, log_send),
-                scada_wait,
-                vfd_wait,
-                log_wait,
+                step: links.step,
+                scada_wake_isr: links.scada_wake_isr,
+                scada_wait: links.scada_wait,
+                vfd_wait: links.vfd_wait,
+                log_wait: links.log_wait,
             },
         )
     }
