@@ -1,7 +1,23 @@
-//! The HardFault entry both boards use (target only).
+//! The HardFault entry both boards use, and its report (target only).
+
+pub use cortex_m_rt::ExceptionFrame;
+
+/// Logs a HardFault: the faulting `pc` and `lr` from the stacked frame `ef`, or, with `None`,
+/// that the stack overflowed (the frame is lost).
+#[cfg(feature = "defmt")]
+pub fn report(ef: Option<&ExceptionFrame>) {
+    match ef {
+        Some(ef) => defmt::error!(
+            "HardFault at pc={=u32:#010x} lr={=u32:#010x}",
+            ef.pc(),
+            ef.lr()
+        ),
+        None => defmt::error!("HardFault: stack overflow"),
+    }
+}
 
 /// Defines the `HardFault` handler: a trampoline that survives a stack overflow, then
-/// `$handler`, a `fn(Option<&cortex_m_rt::ExceptionFrame>) -> !` of the board (`None` after
+/// `$handler`, a `fn(Option<&`[`ExceptionFrame`]`>) -> !` of the board (`None` after
 /// a stack overflow, when the stacked frame is lost).
 ///
 /// flip-link puts the stack at the bottom of RAM, below `.data`/`.bss`: an overflow leaves SP
@@ -40,7 +56,7 @@ macro_rules! hard_fault_trampoline {
         /// # Safety
         /// `ef` is null or points at the stacked exception frame.
         unsafe extern "C" fn __firmware_hard_fault(
-            ef: *const $crate::__private::ExceptionFrame,
+            ef: *const $crate::fault::ExceptionFrame,
         ) -> ! {
             // SAFETY: the trampoline passes the stacked frame, or null.
             $handler(unsafe { ef.as_ref() })

@@ -49,7 +49,7 @@ pub mod models {
 
 pub mod dac;
 #[cfg(target_os = "none")]
-mod fault;
+pub mod fault;
 pub mod port;
 pub mod selftest;
 #[cfg(all(feature = "semihosting", target_os = "none"))]
@@ -67,11 +67,19 @@ pub fn start_systick(mut syst: cortex_m::peripheral::SYST, reload: u32) {
     syst.enable_counter();
 }
 
-/// What [`hard_fault_trampoline!`] names in the board's crate.
-#[cfg(target_os = "none")]
-#[doc(hidden)]
-pub mod __private {
-    pub use cortex_m_rt::ExceptionFrame;
+/// Starts the STM32 timer `$tim` (a PAC timer: TIM2 or TIM5, 32-bit) counting up from 0,
+/// free-running at its clock / (`$psc` + 1), wrapping at 2³², no interrupts: a time base to
+/// read (e.g. at 1 MHz for µs). Its clock must be enabled first (RCC). A macro: each chip's
+/// PAC has its own timer types, with the same register API.
+#[macro_export]
+macro_rules! free_running {
+    ($tim:expr, $psc:expr) => {{
+        let t = $tim;
+        t.psc().write(|w| w.psc().set($psc));
+        t.arr().write(|w| w.arr().set(u32::MAX));
+        t.egr().write(|w| w.ug().set_bit());
+        t.cr1().modify(|_, w| w.cen().set_bit());
+    }};
 }
 
 /// Pressure model period, ms.

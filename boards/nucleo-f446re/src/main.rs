@@ -93,7 +93,7 @@ firmware::hard_fault_trampoline!(hard_fault);
 
 /// Takes the torque reference to 0 V, logs the fault (`None`: a stack overflow) and resets
 /// the MCU.
-fn hard_fault(ef: Option<&firmware::__private::ExceptionFrame>) -> ! {
+fn hard_fault(ef: Option<&firmware::fault::ExceptionFrame>) -> ! {
     // SAFETY: the DAC's control and data registers, written once with every task stopped
     // (a HardFault preempts them all): channel 1 off, its code 0.
     unsafe {
@@ -101,14 +101,8 @@ fn hard_fault(ef: Option<&firmware::__private::ExceptionFrame>) -> ! {
         dac.dhr12r1().write(|w| w.daccdhr().set(0));
         dac.cr().modify(|_, w| w.en1().clear_bit());
     }
-    match ef {
-        Some(ef) => defmt::error!(
-            "HardFault at pc={=u32:#010x} lr={=u32:#010x}: torque reference off, reset",
-            ef.pc(),
-            ef.lr()
-        ),
-        None => defmt::error!("HardFault: stack overflow; torque reference off, reset"),
-    }
+    firmware::fault::report(ef);
+    defmt::error!("torque reference off, reset");
     cortex_m::peripheral::SCB::sys_reset()
 }
 
@@ -141,7 +135,7 @@ mod app {
         prelude::*,
         rcc::Config as RccConfig,
         serial::{self, Rx, Serial, Tx},
-        timer::{CounterUs, Event, Flag},
+        timer::{self, CounterUs, Event, Flag},
         watchdog::IndependentWatchdog,
     };
 
@@ -159,6 +153,32 @@ mod app {
     pub struct Line<P, T> {
         port: P,
         gap: CounterUs<T>,
+    }
+
+    impl<TX, RX, DE, T> Line<PortIsr<TX, RX, DE>, T>
+    where
+        TX: embedded_hal_nb::serial::Write<u8>,
+        RX: embedded_hal_nb::serial::Read<u8>,
+        DE: embedded_hal::digital::OutputPin,
+        T: timer::Instance,
+    {
+        /// The USART's interrupt: the port's work, the gap timer restarted by a received
+        /// byte. Returns whether a frame is still going out (the TC interrupt stays on).
+        fn on_usart(&mut self) -> bool {
+            let done = self.port.on_interrupt(&MARGIN);
+            if done.received > 0 {
+                let _ = self.gap.start(gap_us(BAUD_BPS).micros());
+            }
+            done.sending
+        }
+
+        /// The gap timer's interrupt: the line has been silent for 3.5 characters, the frame
+        /// is complete.
+        fn on_gap(&mut self) {
+            self.gap.clear_flags(Flag::Update);
+            let _ = self.gap.cancel();
+            self.port.mark_gap(&MARGIN);
+        }
     }
 
     #[shared]
@@ -218,10 +238,7 @@ mod app {
                 .apb1enr()
                 .modify(|_, w| w.tim5en().set_bit())
         };
-        dp.TIM5.psc().write(|w| w.psc().set(89));
-        dp.TIM5.arr().write(|w| w.arr().set(u32::MAX));
-        dp.TIM5.egr().write(|w| w.ug().set_bit());
-        dp.TIM5.cr1().modify(|_, w| w.cen().set_bit());
+        firmware::free_running!(&dp.TIM5, 89);
         cp.DCB.enable_trace();
         cp.DWT.enable_cycle_counter();
 
@@ -373,24 +390,15 @@ mod app {
     #[task(binds = USART1, priority = 4, shared = [scada_line])]
     fn usart1(mut cx: usart1::Context) {
         let t0 = cycles();
-        cx.shared.scada_line.lock(|l| {
-            let done = l.port.on_interrupt(&MARGIN);
-            if done.received > 0 {
-                let _ = l.gap.start(gap_us(BAUD_BPS).micros());
-            }
-            tc_interrupt!(pac::USART1, done.sending);
-        });
+        let sending = cx.shared.scada_line.lock(|l| l.on_usart());
+        tc_interrupt!(pac::USART1, sending);
         record_max(&MARGIN.usart_handler_max, cycles().wrapping_sub(t0));
     }
 
     /// SCADA's line has been silent for 3.5 characters: the frame is complete.
     #[task(binds = TIM6_DAC, priority = 4, shared = [scada_line], local = [scada_wake_gap])]
     fn tim6(mut cx: tim6::Context) {
-        cx.shared.scada_line.lock(|l| {
-            l.gap.clear_flags(Flag::Update);
-            let _ = l.gap.cancel();
-            l.port.mark_gap(&MARGIN);
-        });
+        cx.shared.scada_line.lock(|l| l.on_gap());
         let _ = cx.local.scada_wake_gap.try_send(());
     }
 
@@ -398,24 +406,15 @@ mod app {
     #[task(binds = USART6, priority = 4, shared = [vfd_line])]
     fn usart6(mut cx: usart6::Context) {
         let t0 = cycles();
-        cx.shared.vfd_line.lock(|l| {
-            let done = l.port.on_interrupt(&MARGIN);
-            if done.received > 0 {
-                let _ = l.gap.start(gap_us(BAUD_BPS).micros());
-            }
-            tc_interrupt!(pac::USART6, done.sending);
-        });
+        let sending = cx.shared.vfd_line.lock(|l| l.on_usart());
+        tc_interrupt!(pac::USART6, sending);
         record_max(&MARGIN.usart_handler_max, cycles().wrapping_sub(t0));
     }
 
     /// The VFD's line has been silent for 3.5 characters.
     #[task(binds = TIM7, priority = 4, shared = [vfd_line])]
     fn tim7(mut cx: tim7::Context) {
-        cx.shared.vfd_line.lock(|l| {
-            l.gap.clear_flags(Flag::Update);
-            let _ = l.gap.cancel();
-            l.port.mark_gap(&MARGIN);
-        });
+        cx.shared.vfd_line.lock(|l| l.on_gap());
     }
 
     /// Every 1 ms: the due ADC conversions, one controller step, the torque reference to the

@@ -32,33 +32,13 @@ pub fn now_ns() -> u32 {
     unsafe { (*pac::TIM2::ptr()).cnt().read().bits() }
 }
 
-/// Starts `tim` (TIM2 or TIM5, 32-bit) from 0, free-running at QEMU's 1 GHz / (`psc` + 1),
-/// no interrupts.
-#[macro_export]
-macro_rules! free_running {
-    ($tim:expr, $psc:expr) => {{
-        let t = $tim;
-        t.psc().write(|w| w.psc().set($psc));
-        t.arr().write(|w| w.arr().set(u32::MAX));
-        t.egr().write(|w| w.ug().set_bit());
-        t.cr1().modify(|_, w| w.cen().set_bit());
-    }};
-}
-
 // Fault report: the HardFault handler's frame (or a stack overflow caught by flip-link's
 // layout), logged, then QEMU exits with status 1.
 firmware::hard_fault_trampoline!(hard_fault);
 
 /// Logs the fault and exits QEMU with status 1 (`None`: a stack overflow).
-fn hard_fault(ef: Option<&firmware::__private::ExceptionFrame>) -> ! {
-    match ef {
-        Some(ef) => defmt::error!(
-            "HardFault at pc={=u32:#010x} lr={=u32:#010x}",
-            ef.pc(),
-            ef.lr()
-        ),
-        None => defmt::error!("HardFault: stack overflow"),
-    }
+fn hard_fault(ef: Option<&firmware::fault::ExceptionFrame>) -> ! {
+    firmware::fault::report(ef);
     exit(false)
 }
 
@@ -78,8 +58,8 @@ fn panic(info: &core::panic::PanicInfo) -> ! {
 pub fn start_time_bases(rcc: &pac::RCC, tim2: &pac::TIM2, tim5: &pac::TIM5) {
     rcc.apb1enr()
         .modify(|_, w| w.tim2en().set_bit().tim5en().set_bit());
-    free_running!(tim5, 999);
-    free_running!(tim2, 0);
+    firmware::free_running!(tim5, 999);
+    firmware::free_running!(tim2, 0);
 }
 
 /// Ends the QEMU run: exit status 0 (`true`) or 1.
