@@ -492,22 +492,34 @@ mod tests {
         assert_eq!(out[..], req[..]);
     }
 
+    /// A SCADA link of the bench configuration on a port that finds requests by their
+    /// content, with a receive queue of `R` entries; `requests` requests for `registers`
+    /// input registers received.
+    fn scada<const R: usize>(
+        requests: usize,
+        registers: u8,
+    ) -> (Config, ScadaLink, Isr, PortTask, Tx, Margin) {
+        let config = Config::bench();
+        let link = ScadaLink::new(&config).unwrap();
+        let (mut isr, task, rx, tx) = port::<R, 3>(10_000, Some(request_at_end));
+        let margin = Margin::new();
+        let req = with_crc(&[config.scada_unit, 4, 0, 0, 0, registers]);
+        for _ in 0..requests {
+            rx.bytes(&req);
+        }
+        isr.on_interrupt(&margin);
+        (config, link, isr, task, tx, margin)
+    }
+
     #[test]
     fn the_scada_server_answers_and_hands_on_the_commands() {
-        let config = Config::bench();
-        let mut link = ScadaLink::new(&config).unwrap();
-        let (mut isr, mut task, rx, tx) = port::<64, 3>(10_000, Some(request_at_end));
-        let margin = Margin::new();
+        // Two requests for 4 input registers at once: two answers, the commands after each.
+        let (config, mut link, mut isr, mut task, tx, margin) = scada::<64>(2, 4);
         let published = Published {
             pressure_mca: 3.5,
             ..Published::default()
         };
         let (mut reads, mut handed) = (0, 0);
-        // Two requests for the input registers at once: two answers, the commands after each.
-        let req = with_crc(&[config.scada_unit, 4, 0, 0, 0, 4]);
-        rx.bytes(&req);
-        rx.bytes(&req);
-        isr.on_interrupt(&margin);
         let dropped = serve_scada(
             &mut task,
             &mut link,
@@ -537,15 +549,7 @@ mod tests {
 
     #[test]
     fn answers_the_transmit_queue_cannot_take_are_counted() {
-        let config = Config::bench();
-        let mut link = ScadaLink::new(&config).unwrap();
-        let (mut isr, mut task, rx, _) = port::<1024, 3>(10_000, Some(request_at_end));
-        let margin = Margin::new();
-        let req = with_crc(&[config.scada_unit, 4, 0, 0, 0, 1]);
-        for _ in 0..10 {
-            rx.bytes(&req);
-        }
-        isr.on_interrupt(&margin);
+        let (_, mut link, _, mut task, _, _) = scada::<1024>(10, 1);
         // Nothing goes out meanwhile (the interrupt does not run): the queue fills.
         let dropped = serve_scada(&mut task, &mut link, 0, Published::default, |_| {});
         assert!((7..10).contains(&dropped), "{dropped}");
