@@ -12,8 +12,8 @@
 //! |---|---|---|
 //! | 4 (highest) | USART receive / transmit interrupts (and the Nucleo's RTU gap timers) | bytes into and out of `heapless` queues ([`port::PortIsr`]) |
 //! | 3 | control, every 1 ms | [`controller::control::Controller::step`], torque output, watchdog; then [`tasks::StepLinks::after_step`] |
-//! | 2 | VFD master | one pass after each control step (a latest-only signal): [`tasks::vfd_pass`] |
-//! | 1 | SCADA server, log | Modbus requests ([`port::serve_scada`]), defmt lines ([`tasks::log`]) |
+//! | 2 | VFD master | one pass after each control step (a latest-only signal): [`tasks::vfd_master`] |
+//! | 1 | SCADA server, log | Modbus requests ([`tasks::scada_server`]), defmt lines ([`tasks::log_task`]) |
 //! | idle | | `wfi` |
 //!
 //! The control task never waits for a link: it reads the last [`Commands`] and
@@ -24,8 +24,8 @@
 //! masked (the logger masks them while it writes a frame): [`Margin`] measures both, and the
 //! control task's longest run.
 //!
-//! Everything but the target-only [`hard_fault_trampoline!`] and `semihosting` is plain
-//! `no_std` code, tested on the host (`cargo test -p firmware`).
+//! Everything but the target-only parts (`hard_fault_trampoline!` and `fault`, `semihosting`,
+//! `start_systick`) is plain `no_std` code, tested on the host (`cargo test -p firmware`).
 //!
 //! The NARMAX models are `src/models/*.rs`, made by `pumpbench export`.
 #![no_std]
