@@ -1,11 +1,8 @@
-//! Puts the memory layout where the cortex-m-rt linker script finds it, as `boards/qemu`'s
-//! build script does (STM32F405 as QEMU's netduinoplus2 models it).
-use std::{env, fs, path::PathBuf};
+//! The chip's memory layout where cortex-m-rt's linker script finds it: the STM32F405RG as
+//! QEMU's netduinoplus2 models it, the QEMU board's (the helper and the layouts are in
+//! `boards/chips/`).
+include!("../boards/chips/memory_x.rs");
 
 fn main() {
-    let out = PathBuf::from(env::var_os("OUT_DIR").expect("OUT_DIR"));
-    fs::copy("../memory.x", out.join("memory.x")).expect("copy ../memory.x");
-    println!("cargo:rustc-link-search={}", out.display());
-    println!("cargo:rerun-if-changed=../memory.x");
-    println!("cargo:rerun-if-changed=build.rs");
+    memory_x("../boards/chips", "stm32f405rg");
 }

@@ -1,12 +1,8 @@
-//! The board's memory layout where cortex-m-rt's linker script finds it, and defmt's linker
-//! script.
-use std::{env, fs, path::PathBuf};
+//! The chip's memory layout (STM32F446RE) where cortex-m-rt's linker script finds it, and
+//! defmt's linker script.
+include!("../chips/memory_x.rs");
 
 fn main() {
-    let out = PathBuf::from(env::var_os("OUT_DIR").expect("OUT_DIR"));
-    fs::copy("memory.x", out.join("memory.x")).expect("copy memory.x");
-    println!("cargo:rustc-link-search={}", out.display());
+    memory_x("../chips", "stm32f446re");
     println!("cargo:rustc-link-arg-bins=-Tdefmt.x");
-    println!("cargo:rerun-if-changed=memory.x");
-    println!("cargo:rerun-if-changed=build.rs");
 }

@@ -1,17 +1,19 @@
 //! What both boards of the bench controller share: the compiled-in NARMAX models, the
 //! controller built from them, the RTU framing of a byte queue filled by a USART interrupt,
-//! and the run's timing margins.
+//! the bodies of the RTIC tasks, the torque reference's DAC code, the fault trampoline, and
+//! the run's timing margins. A board is its pins, clocks, HAL set-up and the RTIC app that
+//! declares the tasks (RTIC 2 wants them in the app), each task's body one call into here.
 //!
 //! Each board is a crate of its own beside this one (`boards/qemu`, `boards/nucleo-f446re`),
-//! with its memory layout, cargo runner, logger and RTIC application. On both the schedule
-//! is the same:
+//! with its chip's memory layout (`boards/chips/`), cargo runner, logger and RTIC
+//! application. On both the schedule is the same:
 //!
 //! | priority | task | what |
 //! |---|---|---|
-//! | 4 (highest) | USART receive / transmit interrupts (and the Nucleo's RTU gap timers) | bytes into and out of `heapless` queues |
-//! | 3 | control, every 1 ms | [`controller::control::Controller::step`], torque output, watchdog |
-//! | 2 | VFD master | one pass after each control step (a latest-only signal) |
-//! | 1 | SCADA server, log | Modbus requests, defmt lines |
+//! | 4 (highest) | USART receive / transmit interrupts (and the Nucleo's RTU gap timers) | bytes into and out of `heapless` queues ([`port::PortIsr`]) |
+//! | 3 | control, every 1 ms | [`controller::control::Controller::step`], torque output, watchdog; then [`tasks::StepLinks::after_step`] |
+//! | 2 | VFD master | one pass after each control step (a latest-only signal): [`tasks::vfd_master`] |
+//! | 1 | SCADA server, log | Modbus requests ([`tasks::scada_server`]), defmt lines ([`tasks::log_task`]) |
 //! | idle | | `wfi` |
 //!
 //! The control task never waits for a link: it reads the last [`Commands`] and
@@ -22,10 +24,16 @@
 //! masked (the logger masks them while it writes a frame): [`Margin`] measures both, and the
 //! control task's longest run.
 //!
+//! Everything but the target-only parts (`hard_fault_trampoline!` and `fault`, `semihosting`,
+//! `start_systick`) is plain `no_std` code, tested on the host (`cargo test -p firmware`).
+//!
 //! The NARMAX models are the `pump-models` crate (compile-time data made by `pumpbench export`).
 #![no_std]
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
+
+#[cfg(test)]
+extern crate std;
 
 pub use controller::control::{Commands, Inputs, Outputs, VfdStatus};
 use controller::control::{Config, Error, NarmaxModel};
@@ -35,6 +43,41 @@ use model_core::narmax::mcu::build_period_ms;
 
 /// The NARMAX models compiled in (the `pump-models` crate, made by `pumpbench export`).
 pub use pump_models as models;
+
+pub mod dac;
+#[cfg(target_os = "none")]
+pub mod fault;
+pub mod port;
+pub mod selftest;
+#[cfg(all(feature = "semihosting", target_os = "none"))]
+pub mod semihosting;
+pub mod tasks;
+
+/// Starts SysTick from the core clock, interrupting every `reload + 1` core cycles (e.g.
+/// `core_hz / 1000 - 1` for 1 ms; `reload` 1..=0xFF_FFFF).
+#[cfg(target_os = "none")]
+pub fn start_systick(mut syst: cortex_m::peripheral::SYST, reload: u32) {
+    syst.set_clock_source(cortex_m::peripheral::syst::SystClkSource::Core);
+    syst.set_reload(reload);
+    syst.clear_current();
+    syst.enable_interrupt();
+    syst.enable_counter();
+}
+
+/// Starts the STM32 timer `$tim` (a PAC timer: TIM2 or TIM5, 32-bit) counting up from 0,
+/// free-running at its clock / (`$psc` + 1), wrapping at 2³², no interrupts: a time base to
+/// read (e.g. at 1 MHz for µs). Its clock must be enabled first (RCC). A macro: each chip's
+/// PAC has its own timer types, with the same register API.
+#[macro_export]
+macro_rules! free_running {
+    ($tim:expr, $psc:expr) => {{
+        let t = $tim;
+        t.psc().write(|w| w.psc().set($psc));
+        t.arr().write(|w| w.arr().set(u32::MAX));
+        t.egr().write(|w| w.ug().set_bit());
+        t.cr1().modify(|_, w| w.cen().set_bit());
+    }};
+}
 
 /// Pressure model period, ms.
 pub const PRESSURE_MS: u32 = build_period_ms(models::pressure::SAMPLE_PERIOD_S);
@@ -194,336 +237,128 @@ impl MarginSnapshot {
     }
 }
 
-/// A USART's interrupt side: its [`Rs485`] port, the receive queue it fills and the transmit
-/// queue of whole frames it empties. The board's priority-4 handler calls
-/// [`PortIsr::on_interrupt`] and keeps nothing else in it.
-pub mod port {
-    use super::{Margin, Ordering};
-    use controller::control::Commands;
-    use controller::link::{ScadaLink, VfdPort};
-    use controller::modbus::Frame;
-    use controller::rtu::Rs485;
-    use controller::rtu::RtuFramer;
-    use controller::types::Published;
-    use embedded_hal::digital::OutputPin;
-    use embedded_hal_nb::serial::{Read, Write};
-    use heapless::spsc::{Consumer, Producer};
+#[cfg(test)]
+mod tests {
+    use super::*;
 
-    /// The receive queue's mark for "the line went silent" (3.5 characters), put there by a
-    /// board's gap timer ([`PortIsr::mark_gap`]); every other entry is a byte.
-    pub const GAP: u16 = 0x100;
-
-    /// Entries a receive queue holds: more than four longest RTU frames, so a task at the
-    /// lowest priority may fall ≈ 500 ms behind a 19 200-baud line before a byte is lost.
-    pub const RX_QUEUE: usize = 1024;
-    /// Frames a transmit queue holds (a slave answers one request at a time; a master waits
-    /// for its answer): two, one going out and one waiting.
-    pub const TX_QUEUE: usize = 3;
-
-    /// What one [`PortIsr::on_interrupt`] did.
-    #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-    pub struct Activity {
-        /// Bytes received (count).
-        pub received: u32,
-        /// A frame is still going out.
-        pub sending: bool,
+    /// A small deterministic generator (xorshift32) for irregular read intervals.
+    fn xorshift(s: &mut u32) -> u32 {
+        *s ^= *s << 13;
+        *s ^= *s >> 17;
+        *s ^= *s << 5;
+        *s
     }
 
-    /// The interrupt side of one port (the board's priority-4 handler calls it).
-    pub struct PortIsr<TX, RX, DE> {
-        rs485: Rs485<TX, RX, DE>,
-        rx: Producer<'static, u16>,
-        tx: Consumer<'static, Frame>,
+    #[test]
+    fn ms_clock_counts_whole_milliseconds_and_carries_the_rest() {
+        let mut c = MsClock::new(1_000);
+        assert_eq!(c.now_ms(1_000), 0);
+        assert_eq!(c.now_ms(1_999), 0);
+        assert_eq!(c.now_ms(2_000), 1);
+        // 400 µs at a time: the remainders add up.
+        let mut c = MsClock::new(0);
+        let got: std::vec::Vec<u32> = (1..=6).map(|k| c.now_ms(400 * k)).collect();
+        assert_eq!(got, [0, 0, 1, 1, 2, 2]);
+        // The same instant read twice.
+        assert_eq!(c.now_ms(2_400), 2);
     }
 
-    impl<TX: Write<u8>, RX: Read<u8>, DE: OutputPin> PortIsr<TX, RX, DE> {
-        /// The port with its queues' ends.
-        pub fn new(
-            rs485: Rs485<TX, RX, DE>,
-            rx: Producer<'static, u16>,
-            tx: Consumer<'static, Frame>,
-        ) -> Self {
-            Self { rs485, rx, tx }
-        }
+    #[test]
+    fn ms_clock_across_the_counter_wrap() {
+        let start = u32::MAX - 499;
+        let mut c = MsClock::new(start);
+        assert_eq!(c.now_ms(start.wrapping_add(999)), 0);
+        assert_eq!(c.now_ms(start.wrapping_add(1_000)), 1);
+        assert_eq!(c.now_ms(start.wrapping_add(123_456)), 123);
+        // The longest gap between reads it allows: 2³² − 1 µs (71 min).
+        let mut c = MsClock::new(7);
+        assert_eq!(c.now_ms(6), u32::MAX / 1000);
+    }
 
-        /// The gap timer's interrupt: the line has been silent for 3.5 characters since the
-        /// last byte; the frame before it is complete.
-        pub fn mark_gap(&mut self, margin: &Margin) {
-            if self.rx.enqueue(GAP).is_err() {
-                margin.bytes_lost.fetch_add(1, Ordering::Relaxed);
+    /// Over irregular reads (some a few µs apart, some seconds), the clock is always the
+    /// exact whole milliseconds elapsed, wrapping at 2³² ms like the controller's time.
+    #[test]
+    fn ms_clock_is_the_elapsed_time_over_any_reads() {
+        for seed in [1u32, 0x9E37_79B9, 12_345] {
+            let mut s = seed;
+            let start = xorshift(&mut s);
+            let mut c = MsClock::new(start);
+            let (mut now, mut total_us) = (start, 0u64);
+            for _ in 0..100_000 {
+                let r = xorshift(&mut s);
+                let step = match r % 4 {
+                    0 => r % 7,
+                    1 => r % 1_001,
+                    2 => r % 4_000_000,
+                    _ => r % 100_000_000,
+                };
+                now = now.wrapping_add(step);
+                total_us += u64::from(step);
+                assert_eq!(
+                    u64::from(c.now_ms(now)),
+                    (total_us / 1000) % (1 << 32),
+                    "seed {seed}, {total_us} µs"
+                );
             }
         }
+    }
 
-        /// The interrupt's work: every received byte into the receive queue (a byte the full
-        /// queue cannot take, and a USART overrun, count in [`Margin::bytes_lost`]); the next
-        /// queued frame started once the last one is out, and the bytes the transmitter takes.
-        /// Returns what happened: bytes received (a board with a gap timer restarts it) and
-        /// whether a frame is still going out (the board keeps its transmit interrupt on, or,
-        /// under QEMU where it never fires, calls again at once).
-        pub fn on_interrupt(&mut self, margin: &Margin) -> Activity {
-            let overruns = self.rs485.errors().overrun;
-            let (mut got, mut lost) = (0u32, 0u32);
-            let rx = &mut self.rx;
-            self.rs485.on_receive(|b| {
-                got += 1;
-                if rx.enqueue(u16::from(b)).is_err() {
-                    lost += 1;
-                }
-            });
-            lost += self.rs485.errors().overrun.wrapping_sub(overruns);
-            if got > 0 {
-                margin.bytes_received.fetch_add(got, Ordering::Relaxed);
+    #[test]
+    fn record_max_keeps_the_largest() {
+        let m = AtomicU32::new(0);
+        for v in [5, 3, 9, 9, 1, u32::MAX, 0] {
+            record_max(&m, v);
+        }
+        assert_eq!(m.load(Ordering::Relaxed), u32::MAX);
+        let m = AtomicU32::new(0);
+        for v in [5, 3, 9, 1] {
+            record_max(&m, v);
+        }
+        assert_eq!(m.load(Ordering::Relaxed), 9);
+    }
+
+    #[test]
+    fn margin_snapshot_and_the_wait_bound() {
+        let m = Margin::default();
+        assert_eq!(m.snapshot(), MarginSnapshot::default());
+        record_max(&m.usart_handler_max, 120);
+        record_max(&m.masked_max, 4_000);
+        record_max(&m.control_max, 9_000);
+        m.steps.fetch_add(3, Ordering::Relaxed);
+        m.bytes_lost.fetch_add(1, Ordering::Relaxed);
+        m.bytes_received.fetch_add(40, Ordering::Relaxed);
+        let s = m.snapshot();
+        assert_eq!(
+            s,
+            MarginSnapshot {
+                usart_handler_max: 120,
+                masked_max: 4_000,
+                control_max: 9_000,
+                steps: 3,
+                bytes_lost: 1,
+                bytes_received: 40,
             }
-            if lost > 0 {
-                margin.bytes_lost.fetch_add(lost, Ordering::Relaxed);
-            }
-            if !self.rs485.sending() {
-                if let Some(frame) = self.tx.dequeue() {
-                    self.rs485.send(&frame);
-                }
-            }
-            if self.rs485.sending() {
-                self.rs485.on_transmit();
-            }
-            Activity {
-                received: got,
-                sending: self.rs485.sending(),
-            }
-        }
-
-        /// The port's line-error counts.
-        pub fn errors(&self) -> controller::rtu::Errors {
-            self.rs485.errors()
-        }
+        );
+        assert_eq!(s.rx_wait_bound(), 4_120);
+        let huge = MarginSnapshot {
+            usart_handler_max: u32::MAX - 1,
+            masked_max: 5,
+            ..s
+        };
+        assert_eq!(huge.rx_wait_bound(), u32::MAX, "saturates");
     }
 
-    /// Where a whole frame starts at the end of the bytes held, found by its content (see
-    /// [`RtuFramer::take_if`]).
-    pub type FindFrame = fn(&[u8]) -> Option<usize>;
-
-    /// A port's task side: frames out of the receive queue, frames into the transmit queue.
-    pub struct PortTask {
-        rx: Consumer<'static, u16>,
-        tx: Producer<'static, Frame>,
-        framer: RtuFramer,
-        by_content: Option<FindFrame>,
-        pend: fn(),
-        /// Time stamp for the bytes taken next, µs (wrapping).
-        pub now_us: u32,
+    #[test]
+    fn the_compiled_in_controller_builds() {
+        assert!(FLOW_MS.is_multiple_of(PRESSURE_MS) && PRESSURE_MS > 0);
+        assert!(build_controller(&Config::bench()).is_ok());
     }
 
-    impl PortTask {
-        /// The task side of a port whose frames end at a [`GAP`] mark or after `silence_us`
-        /// without a byte (timed from when this side takes them); with `by_content`, also by
-        /// their content (e.g. [`controller::modbus::request_at_end`], for a line that marks
-        /// no silence). `pend` pends the port's interrupt, which starts a queued frame.
-        pub fn new(
-            rx: Consumer<'static, u16>,
-            tx: Producer<'static, Frame>,
-            silence_us: u32,
-            by_content: Option<FindFrame>,
-            pend: fn(),
-        ) -> Self {
-            Self {
-                rx,
-                tx,
-                framer: RtuFramer::new(silence_us),
-                by_content,
-                pend,
-                now_us: 0,
-            }
-        }
-
-        /// The next complete frame into `out`; `false` if none (call again while `true`).
-        pub fn receive_frame(&mut self, out: &mut Frame) -> bool {
-            while let Some(e) = self.rx.dequeue() {
-                if e == GAP {
-                    if self.framer.end_frame(out) {
-                        return true;
-                    }
-                    continue;
-                }
-                self.framer.push(e as u8, self.now_us);
-                if let Some(find) = self.by_content {
-                    if self.framer.take_if(out, find) {
-                        return true;
-                    }
-                }
-            }
-            self.framer.poll(self.now_us, out)
-        }
-
-        /// Queues `frame` for sending and pends the port's interrupt; `false` if the queue is
-        /// full (the frame is dropped).
-        pub fn send_frame(&mut self, frame: &[u8]) -> bool {
-            let mut f = Frame::new();
-            if f.extend_from_slice(frame).is_err() || self.tx.enqueue(f).is_err() {
-                return false;
-            }
-            (self.pend)();
-            true
-        }
-    }
-
-    /// The SCADA server's work on a wake-up at `now_us`: every complete request from `port`
-    /// answered by `link` from the values `published` gives, its answer queued, and the
-    /// holding registers handed to `commands` after each. Returns the answers dropped because
-    /// the transmit queue was full (0 unless the line is stuck).
-    pub fn serve_scada(
-        port: &mut PortTask,
-        link: &mut ScadaLink,
-        now_us: u32,
-        mut published: impl FnMut() -> Published,
-        mut commands: impl FnMut(Commands),
-    ) -> u32 {
-        let (mut frame, mut answer) = (Frame::new(), Frame::new());
-        let mut dropped = 0;
-        port.now_us = now_us;
-        while port.receive_frame(&mut frame) {
-            link.publish(&published());
-            if let Some(n) = link.handle(&frame, &mut answer) {
-                if !port.send_frame(&answer[..n]) {
-                    dropped += 1;
-                }
-            }
-            commands(link.commands());
-        }
-        dropped
-    }
-
-    /// The VFD master's frames over a serial port.
-    impl VfdPort for PortTask {
-        fn send(&mut self, frame: &[u8]) {
-            // A full queue means the drive's line is stuck: the request runs into its timeout.
-            let _ = self.send_frame(frame);
-        }
-        fn receive(&mut self, frame: &mut Frame) -> bool {
-            self.receive_frame(frame)
-        }
-    }
-}
-
-/// The on-target checks (`boards/qemu`'s `selftest` binary; `cargo xtask test` runs it in
-/// QEMU and compares its results with the same functions run on the host, bit for bit).
-pub mod selftest {
-    use controller::modbus::{crc16, request_at_end, Frame};
-    use controller::rtu::{gap_us, RtuFramer};
-    use model_core::narmax::mcu::{tanh_f32, tanh_q15, I16F16, TANH_Q15_MAX_ERROR};
-
-    /// A 32-bit digest of a stream of words (order-sensitive; for comparing results, not for
-    /// security).
-    #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-    pub struct Digest(pub u32);
-
-    impl Digest {
-        /// The empty stream's.
-        pub const fn new() -> Self {
-            Self(0x811C_9DC5)
-        }
-        /// Takes one word.
-        pub fn add(&mut self, w: u32) {
-            self.0 = (self.0.rotate_left(5) ^ w).wrapping_mul(0x9E37_79B1);
-        }
-    }
-
-    impl Default for Digest {
-        fn default() -> Self {
-            Self::new()
-        }
-    }
-
-    /// Inputs of the float checks: 4 097 points from −20 to 20 (the NARMAX pre-activations'
-    /// range and beyond), then 1 024 points from 1e-6 to 1e4 by factors (positive-only
-    /// functions).
-    fn grid(i: u32) -> f32 {
-        if i <= 4096 {
-            -20.0 + 40.0 * i as f32 / 4096.0
-        } else {
-            1e-6 * libm::powf(10.0, 10.0 * (i - 4097) as f32 / 1023.0)
-        }
-    }
-    /// Points of [`grid`].
-    const GRID: u32 = 4097 + 1024;
-
-    /// The digests of the results' bits of `libm`'s `tanhf`, `expf`, `sqrtf` (the ones the
-    /// product uses in f32), the model's `tanh_f32`, and `tanh_q15` over every Q16 input in
-    /// [−8, 8) (its whole table): `(name, digest)`.
-    pub fn digests() -> [(&'static str, u32); 5] {
-        let mut d = [Digest::new(); 5];
-        for i in 0..GRID {
-            let x = grid(i);
-            d[0].add(libm::tanhf(x).to_bits());
-            d[1].add(libm::expf(x.min(80.0)).to_bits());
-            d[2].add(libm::sqrtf(libm::fabsf(x)).to_bits());
-            d[3].add(tanh_f32(x).to_bits());
-        }
-        for x in -(8 << 16)..(8 << 16) {
-            d[4].add(tanh_q15(I16F16::from_bits(x)).to_bits() as u16 as u32);
-        }
-        [
-            ("libm_tanhf", d[0].0),
-            ("libm_expf", d[1].0),
-            ("libm_sqrtf", d[2].0),
-            ("tanh_f32", d[3].0),
-            ("tanh_q15", d[4].0),
-        ]
-    }
-
-    /// `tanh_q15` against `libm::tanhf` on 65 536 points of [−8, 8): the largest error must
-    /// stay within the table's bound ([`TANH_Q15_MAX_ERROR`]) plus tanhf's own rounding.
-    pub fn tanh_table() -> Result<f32, &'static str> {
-        let mut worst = 0.0f32;
-        for k in 0..65_536i32 {
-            let x_q16 = (k - 32_768) * 16;
-            let exact = libm::tanhf(x_q16 as f32 / 65_536.0);
-            let got = f32::from(tanh_q15(I16F16::from_bits(x_q16)).to_bits()) / 32_768.0;
-            worst = worst.max(libm::fabsf(got - exact));
-        }
-        if worst as f64 <= TANH_Q15_MAX_ERROR + 1e-7 {
-            Ok(worst)
-        } else {
-            Err("tanh_q15 off the table's error bound")
-        }
-    }
-
-    fn with_crc(body: &[u8]) -> Frame {
-        let mut f = Frame::new();
-        let _ = f.extend_from_slice(body);
-        let _ = f.extend_from_slice(&crc16(body).to_le_bytes());
-        f
-    }
-
-    /// The RTU framer as the boards use it: a request found by its content right after noise,
-    /// a frame ended by the gap mark, a frame ended by silence, time wrapping.
-    pub fn framer() -> Result<(), &'static str> {
-        let req = with_crc(&[1, 4, 0, 0, 0, 18]);
-        let mut out = Frame::new();
-        let mut f = RtuFramer::new(10_000);
-        for (k, &b) in [0x55u8, 0xAA, 0x13].iter().chain(req.iter()).enumerate() {
-            f.push(b, k as u32);
-        }
-        if !f.take_if(&mut out, request_at_end) || out[..] != req[..] {
-            return Err("a request after noise is not found by its content");
-        }
-        let mut f = RtuFramer::new(gap_us(19_200));
-        for &b in req.iter() {
-            f.push(b, u32::MAX - 100);
-        }
-        if f.poll(u32::MAX - 100 + gap_us(19_200) - 1, &mut out) {
-            return Err("a frame ended before the gap");
-        }
-        if !f.poll((u32::MAX - 100).wrapping_add(gap_us(19_200)), &mut out) || out[..] != req[..] {
-            return Err("a frame not ended by the gap across the time wrap");
-        }
-        for &b in req.iter() {
-            f.push(b, 0);
-        }
-        if !f.end_frame(&mut out) || out[..] != req[..] {
-            return Err("a frame not ended by the gap timer's mark");
-        }
-        if gap_us(19_200) != 2006 {
-            return Err("3.5 characters at 19 200 baud are not 2 006 µs");
-        }
-        Ok(())
+    /// The on-target checks pass on the host too (`cargo xtask replay` compares the digests).
+    #[test]
+    fn the_selftest_checks_pass_on_the_host() {
+        assert_eq!(selftest::framer(), Ok(()));
+        let worst = selftest::tanh_table().unwrap();
+        assert!(worst > 0.0);
     }
 }

@@ -72,8 +72,6 @@ const SYSCLK_HZ: u32 = 180_000_000;
 const WATCHDOG_MS: u32 = 100;
 /// LED LD2 toggles every this many control steps (1 ms each): once a second.
 const LED_TOGGLE_STEPS: u32 = 1000;
-/// Full scale of the 12-bit DAC, code.
-const DAC_FULL_SCALE: f32 = 4095.0;
 /// Silence after which a frame still held is given up, µs (the gap timer ends frames; this
 /// only clears what a lost timer event would leave behind).
 const STALE_FRAME_US: u32 = 20_000;
@@ -90,33 +88,12 @@ fn cycles() -> u32 {
     cortex_m::peripheral::DWT::cycle_count()
 }
 
-// HardFault: a stack overflow (flip-link puts the stack below .data/.bss) leaves SP below
-// RAM, and the handler's first push would fault again (lockup): move SP back to the top first.
-core::arch::global_asm!(
-    ".section .HardFaultTrampoline, \"ax\"",
-    ".global HardFault",
-    ".type HardFault,%function",
-    ".thumb_func",
-    "HardFault:",
-    "  mrs r0, MSP",
-    "  ldr r1, =_stack_end",
-    "  cmp r0, r1",
-    "  bhs 1f",
-    "  ldr r1, =_stack_start",
-    "  msr MSP, r1",
-    "  movs r0, #0",
-    "1:",
-    "  b {handler}",
-    ".ltorg",
-    handler = sym hard_fault,
-);
+// HardFault (a stack overflow too: see the trampoline).
+firmware::hard_fault_trampoline!(hard_fault);
 
-/// Logs the fault, takes the torque reference to 0 V and resets the MCU.
-///
-/// # Safety
-/// Called only by the `HardFault` trampoline, with the exception frame (or null after a stack
-/// overflow).
-unsafe extern "C" fn hard_fault(ef: *const cortex_m_rt::ExceptionFrame) -> ! {
+/// Takes the torque reference to 0 V, logs the fault (`None`: a stack overflow) and resets
+/// the MCU.
+fn hard_fault(ef: Option<&firmware::fault::ExceptionFrame>) -> ! {
     // SAFETY: the DAC's control and data registers, written once with every task stopped
     // (a HardFault preempts them all): channel 1 off, its code 0.
     unsafe {
@@ -124,42 +101,30 @@ unsafe extern "C" fn hard_fault(ef: *const cortex_m_rt::ExceptionFrame) -> ! {
         dac.dhr12r1().write(|w| w.daccdhr().set(0));
         dac.cr().modify(|_, w| w.en1().clear_bit());
     }
-    // SAFETY: the trampoline passes the stacked frame, or null.
-    match unsafe { ef.as_ref() } {
-        Some(ef) => defmt::error!(
-            "HardFault at pc={=u32:#010x} lr={=u32:#010x}: torque reference off, reset",
-            ef.pc(),
-            ef.lr()
-        ),
-        None => defmt::error!("HardFault: stack overflow; torque reference off, reset"),
-    }
+    firmware::fault::report(ef);
+    defmt::error!("torque reference off, reset");
     cortex_m::peripheral::SCB::sys_reset()
 }
 
 /// The timing margins (DWT cycles at 180 MHz).
 static MARGIN: firmware::Margin = firmware::Margin::new();
 
-/// What the control task asks of the VFD task after a step.
-#[derive(Clone, Copy)]
-struct Request {
-    t_ms: u32,
-    torque_pct: f32,
-}
-
 #[rtic::app(device = stm32f4xx_hal::pac, peripherals = true, dispatchers = [EXTI0, EXTI1, EXTI2])]
 mod app {
     use super::*;
-    use controller::control::{Commands, Config, Inputs, LogLine, VfdStatus};
+    use controller::control::{Commands, Config, Inputs, VfdStatus};
     use controller::link::{ScadaLink, VfdLink};
     use controller::modbus::Frame;
     use controller::rtu::{gap_us, Rs485};
     use controller::types::Published;
+    use firmware::dac::{torque_code, DAC12_FULL_SCALE};
     use firmware::port::{PortIsr, PortTask, RX_QUEUE, TX_QUEUE};
+    use firmware::tasks::{
+        log_task, scada_server, vfd_master, vfd_pass, LogWait, ScadaWait, ScadaWake, StepLinks,
+        VfdWait,
+    };
     use firmware::{record_max, Controller};
     use heapless::spsc::Queue;
-    use rtic_sync::channel::{Receiver, Sender};
-    use rtic_sync::signal::{SignalReader, SignalWriter};
-    use rtic_sync::{make_channel, make_signal};
     use stm32f4xx_hal::{
         adc::{
             config::{AdcConfig, Clock, SampleTime},
@@ -170,7 +135,7 @@ mod app {
         prelude::*,
         rcc::Config as RccConfig,
         serial::{self, Rx, Serial, Tx},
-        timer::{CounterUs, Event, Flag},
+        timer::{self, CounterUs, Event, Flag},
         watchdog::IndependentWatchdog,
     };
 
@@ -179,7 +144,6 @@ mod app {
     /// sampling lets the 150 Ω source (and a protection resistor and filter capacitor, if
     /// fitted) settle fully. The sampling instant is the control step's, within its jitter.
     const SAMPLE_TIME: SampleTime = SampleTime::Cycles_480;
-    const LOG_CAP: usize = 4;
 
     type ScadaIsr = PortIsr<Tx<pac::USART1>, Rx<pac::USART1>, PA8<Output<PushPull>>>;
     type VfdIsr = PortIsr<Tx<pac::USART6>, Rx<pac::USART6>, PB0<Output<PushPull>>>;
@@ -189,6 +153,32 @@ mod app {
     pub struct Line<P, T> {
         port: P,
         gap: CounterUs<T>,
+    }
+
+    impl<TX, RX, DE, T> Line<PortIsr<TX, RX, DE>, T>
+    where
+        TX: embedded_hal_nb::serial::Write<u8>,
+        RX: embedded_hal_nb::serial::Read<u8>,
+        DE: embedded_hal::digital::OutputPin,
+        T: timer::Instance,
+    {
+        /// The USART's interrupt: the port's work, the gap timer restarted by a received
+        /// byte. Returns whether a frame is still going out (the TC interrupt stays on).
+        fn on_usart(&mut self) -> bool {
+            let done = self.port.on_interrupt(&MARGIN);
+            if done.received > 0 {
+                let _ = self.gap.start(gap_us(BAUD_BPS).micros());
+            }
+            done.sending
+        }
+
+        /// The gap timer's interrupt: the line has been silent for 3.5 characters, the frame
+        /// is complete.
+        fn on_gap(&mut self) {
+            self.gap.clear_flags(Flag::Update);
+            let _ = self.gap.cancel();
+            self.port.mark_gap(&MARGIN);
+        }
     }
 
     #[shared]
@@ -213,13 +203,11 @@ mod app {
         vfd_port: PortTask,
         scada: ScadaLink,
         vfd: VfdLink,
-        scada_wake: Sender<'static, (), 1>,
-        scada_wake_gap: Sender<'static, (), 1>,
-        scada_rx: Receiver<'static, (), 1>,
-        vfd_req: SignalWriter<'static, Request>,
-        vfd_wait: SignalReader<'static, Request>,
-        log_tx: Sender<'static, LogLine, LOG_CAP>,
-        log_rx: Receiver<'static, LogLine, LOG_CAP>,
+        step: StepLinks,
+        scada_wake_gap: ScadaWake,
+        scada_wait: ScadaWait,
+        vfd_wait: VfdWait,
+        log_wait: LogWait,
     }
 
     #[init(local = [
@@ -250,10 +238,7 @@ mod app {
                 .apb1enr()
                 .modify(|_, w| w.tim5en().set_bit())
         };
-        dp.TIM5.psc().write(|w| w.psc().set(89));
-        dp.TIM5.arr().write(|w| w.arr().set(u32::MAX));
-        dp.TIM5.egr().write(|w| w.ug().set_bit());
-        dp.TIM5.cr1().modify(|_, w| w.cen().set_bit());
+        firmware::free_running!(&dp.TIM5, 89);
         cp.DCB.enable_trace();
         cp.DWT.enable_cycle_counter();
 
@@ -329,16 +314,9 @@ mod app {
             rtic::pend(pac::Interrupt::USART6)
         });
 
-        let mut syst = cp.SYST;
-        syst.set_clock_source(cortex_m::peripheral::syst::SystClkSource::Core);
-        syst.set_reload(SYSCLK_HZ / 1000 - 1);
-        syst.clear_current();
-        syst.enable_interrupt();
-        syst.enable_counter();
+        firmware::start_systick(cp.SYST, SYSCLK_HZ / 1000 - 1);
 
-        let (scada_wake, scada_rx) = make_channel!((), 1);
-        let (vfd_req, vfd_wait) = make_signal!(Request);
-        let (log_tx, log_rx) = make_channel!(LogLine, LOG_CAP);
+        let links = firmware::tasks::links();
 
         // The watchdog last, so that a slow start-up cannot reset the board in a loop;
         // frozen while a debugger halts the core.
@@ -347,7 +325,7 @@ mod app {
         watchdog.start(WATCHDOG_MS.millis());
 
         defmt::info!(
-            "NUCLEO-F446RE bench controller: sysclk {=u32} Hz, RTU {=u32} baud, gap {=u32} µs",
+            "NUCLEO-F446RE bench controller: sysclk {=u32} Hz, RTU {=u32} baud, gap {=u32} µs, margins in DWT cycles",
             rcc.clocks.sysclk().raw(),
             BAUD_BPS,
             gap_us(BAUD_BPS)
@@ -381,13 +359,11 @@ mod app {
                 vfd_port,
                 scada,
                 vfd,
-                scada_wake_gap: scada_wake.clone(),
-                scada_wake,
-                scada_rx,
-                vfd_req,
-                vfd_wait,
-                log_tx,
-                log_rx,
+                step: links.step,
+                scada_wake_gap: links.scada_wake_isr,
+                scada_wait: links.scada_wait,
+                vfd_wait: links.vfd_wait,
+                log_wait: links.log_wait,
             },
         )
     }
@@ -414,24 +390,15 @@ mod app {
     #[task(binds = USART1, priority = 4, shared = [scada_line])]
     fn usart1(mut cx: usart1::Context) {
         let t0 = cycles();
-        cx.shared.scada_line.lock(|l| {
-            let done = l.port.on_interrupt(&MARGIN);
-            if done.received > 0 {
-                let _ = l.gap.start(gap_us(BAUD_BPS).micros());
-            }
-            tc_interrupt!(pac::USART1, done.sending);
-        });
+        let sending = cx.shared.scada_line.lock(|l| l.on_usart());
+        tc_interrupt!(pac::USART1, sending);
         record_max(&MARGIN.usart_handler_max, cycles().wrapping_sub(t0));
     }
 
     /// SCADA's line has been silent for 3.5 characters: the frame is complete.
     #[task(binds = TIM6_DAC, priority = 4, shared = [scada_line], local = [scada_wake_gap])]
     fn tim6(mut cx: tim6::Context) {
-        cx.shared.scada_line.lock(|l| {
-            l.gap.clear_flags(Flag::Update);
-            let _ = l.gap.cancel();
-            l.port.mark_gap(&MARGIN);
-        });
+        cx.shared.scada_line.lock(|l| l.on_gap());
         let _ = cx.local.scada_wake_gap.try_send(());
     }
 
@@ -439,31 +406,22 @@ mod app {
     #[task(binds = USART6, priority = 4, shared = [vfd_line])]
     fn usart6(mut cx: usart6::Context) {
         let t0 = cycles();
-        cx.shared.vfd_line.lock(|l| {
-            let done = l.port.on_interrupt(&MARGIN);
-            if done.received > 0 {
-                let _ = l.gap.start(gap_us(BAUD_BPS).micros());
-            }
-            tc_interrupt!(pac::USART6, done.sending);
-        });
+        let sending = cx.shared.vfd_line.lock(|l| l.on_usart());
+        tc_interrupt!(pac::USART6, sending);
         record_max(&MARGIN.usart_handler_max, cycles().wrapping_sub(t0));
     }
 
     /// The VFD's line has been silent for 3.5 characters.
     #[task(binds = TIM7, priority = 4, shared = [vfd_line])]
     fn tim7(mut cx: tim7::Context) {
-        cx.shared.vfd_line.lock(|l| {
-            l.gap.clear_flags(Flag::Update);
-            let _ = l.gap.cancel();
-            l.port.mark_gap(&MARGIN);
-        });
+        cx.shared.vfd_line.lock(|l| l.on_gap());
     }
 
     /// Every 1 ms: the due ADC conversions, one controller step, the torque reference to the
     /// DAC, the watchdog fed; then the links are woken with what the step left them.
     #[task(binds = SysTick, priority = 3,
-           local = [core, adc, pressure_pin, flow_pin, dac, watchdog, led, vfd_req, log_tx,
-                    scada_wake, steps: u32 = 0],
+           local = [core, adc, pressure_pin, flow_pin, dac, watchdog, led, step,
+                    steps: u32 = 0],
            shared = [commands, published, vfd_status])]
     fn control(mut cx: control::Context) {
         let t0 = cycles();
@@ -484,73 +442,41 @@ mod app {
             vfd: cx.shared.vfd_status.lock(|s| *s),
         };
         let out = l.core.step(&inputs);
-        // 0 % → 0 V, 100 % → 3.3 V at PA4 (×3.03 → 0-10 V at the VFD); clamped, NaN → 0.
-        let code = (out.torque_ref_pct.clamp(0.0, 100.0) / 100.0 * DAC_FULL_SCALE + 0.5) as u16;
-        l.dac.set_value(code);
+        // 0 % → 0 V, 100 % → 3.3 V at PA4 (×3.03 → 0-10 V at the VFD).
+        l.dac
+            .set_value(torque_code(out.torque_ref_pct, DAC12_FULL_SCALE));
         l.watchdog.feed();
         *l.steps = l.steps.wrapping_add(1);
         if l.steps.is_multiple_of(LED_TOGGLE_STEPS) {
             l.led.toggle();
         }
-        cx.shared.published.lock(|p| *p = out.published);
-        l.vfd_req.write(Request {
-            t_ms: out.t_ms,
-            torque_pct: out.requested_torque_pct,
-        });
-        let _ = l.scada_wake.try_send(());
-        if let Some(line) = out.log {
-            let _ = l.log_tx.try_send(line);
-        }
-        MARGIN
-            .steps
-            .fetch_add(1, core::sync::atomic::Ordering::Relaxed);
+        let published = &mut cx.shared.published;
+        l.step
+            .after_step(&out, &MARGIN, |p| published.lock(|x| *x = *p));
         record_max(&MARGIN.control_max, cycles().wrapping_sub(t0));
     }
 
     /// The SCADA server.
-    #[task(priority = 1, local = [scada, scada_port, scada_rx], shared = [commands, published])]
+    #[task(priority = 1, local = [scada, scada_port, scada_wait], shared = [commands, published])]
     async fn scada(cx: scada::Context) {
-        let (mut published, mut commands) = (cx.shared.published, cx.shared.commands);
-        while cx.local.scada_rx.recv().await.is_ok() {
-            let dropped = firmware::port::serve_scada(
-                cx.local.scada_port,
-                cx.local.scada,
-                now_us(),
-                || published.lock(|p| *p),
-                |c| commands.lock(|x| *x = c),
-            );
-            if dropped > 0 {
-                defmt::warn!(
-                    "{=u32} SCADA answers dropped (transmit queue full)",
-                    dropped
-                );
-            }
-        }
+        let l = cx.local;
+        let (port, link) = (l.scada_port, l.scada);
+        let (published, commands) = (cx.shared.published, cx.shared.commands);
+        scada_server(l.scada_wait, port, link, now_us, published, commands).await
     }
 
     /// The VFD master: one pass after each control step, at its time (a latest-only signal).
     #[task(priority = 2, local = [vfd, vfd_port, vfd_wait], shared = [vfd_status])]
-    async fn vfd(mut cx: vfd::Context) {
-        loop {
-            let r = cx.local.vfd_wait.wait().await;
-            let port = &mut *cx.local.vfd_port;
-            port.now_us = now_us();
-            let link = &mut *cx.local.vfd;
-            link.poll(r.t_ms, r.torque_pct, port);
-            let s = link.status();
-            cx.shared.vfd_status.lock(|x| *x = s);
-        }
+    async fn vfd(cx: vfd::Context) {
+        let (link, port) = (cx.local.vfd, cx.local.vfd_port);
+        let pass = |r| vfd_pass(link, port.at(now_us()), r);
+        vfd_master(cx.local.vfd_wait, pass, cx.shared.vfd_status).await
     }
 
-    /// The once-a-second line and the margins, over RTT.
-    #[task(priority = 1, local = [log_rx])]
+    /// The once-a-second line and the margins (DWT cycles at 180 MHz), over RTT. The run
+    /// does not end here (no `Done` is sent).
+    #[task(priority = 1, local = [log_wait])]
     async fn log(cx: log::Context) {
-        while let Ok(line) = cx.local.log_rx.recv().await {
-            let t0 = cycles();
-            defmt::info!("{}", line);
-            record_max(&MARGIN.masked_max, cycles().wrapping_sub(t0));
-            let m = MARGIN.snapshot();
-            defmt::info!("margin (cycles at 180 MHz): {}", m);
-        }
+        log_task(cx.local.log_wait, &MARGIN, cycles).await;
     }
 }

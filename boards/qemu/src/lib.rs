@@ -4,7 +4,6 @@
 
 pub mod args;
 
-use cortex_m_semihosting::debug;
 use defmt_semihosting as _;
 use stm32f4xx_hal::pac;
 
@@ -33,60 +32,14 @@ pub fn now_ns() -> u32 {
     unsafe { (*pac::TIM2::ptr()).cnt().read().bits() }
 }
 
-/// Starts `tim` (TIM2 or TIM5, 32-bit) from 0, free-running at QEMU's 1 GHz / (`psc` + 1),
-/// no interrupts.
-#[macro_export]
-macro_rules! free_running {
-    ($tim:expr, $psc:expr) => {{
-        let t = $tim;
-        t.psc().write(|w| w.psc().set($psc));
-        t.arr().write(|w| w.arr().set(u32::MAX));
-        t.egr().write(|w| w.ug().set_bit());
-        t.cr1().modify(|_, w| w.cen().set_bit());
-    }};
-}
-
 // Fault report: the HardFault handler's frame (or a stack overflow caught by flip-link's
 // layout), logged, then QEMU exits with status 1.
-core::arch::global_asm!(
-    ".section .HardFaultTrampoline, \"ax\"",
-    ".global HardFault",
-    ".type HardFault,%function",
-    ".thumb_func",
-    "HardFault:",
-    // flip-link puts the stack at the bottom of RAM: an overflow leaves SP below it, and the
-    // handler's first push would fault again (lockup). Move SP back to the top first.
-    "  mrs r0, MSP",
-    "  ldr r1, =_stack_end",
-    "  cmp r0, r1",
-    "  bhs 1f",
-    "  ldr r1, =_stack_start",
-    "  msr MSP, r1",
-    "  movs r0, #0",
-    "1:",
-    "  b {handler}",
-    ".ltorg",
-    handler = sym hard_fault,
-);
+firmware::hard_fault_trampoline!(hard_fault);
 
-/// Logs the fault and exits QEMU with status 1.
-///
-/// # Safety
-/// Called only by the `HardFault` trampoline, with the exception frame (or null after a stack
-/// overflow).
-unsafe extern "C" fn hard_fault(ef: *const cortex_m_rt::ExceptionFrame) -> ! {
-    // SAFETY: the trampoline passes the stacked frame, or null.
-    match unsafe { ef.as_ref() } {
-        Some(ef) => defmt::error!(
-            "HardFault at pc={=u32:#010x} lr={=u32:#010x}",
-            ef.pc(),
-            ef.lr()
-        ),
-        None => defmt::error!("HardFault: stack overflow"),
-    }
-    debug::exit(debug::EXIT_FAILURE);
-    #[allow(clippy::empty_loop)]
-    loop {}
+/// Logs the fault and exits QEMU with status 1 (`None`: a stack overflow).
+fn hard_fault(ef: Option<&firmware::fault::ExceptionFrame>) -> ! {
+    firmware::fault::report(ef);
+    exit(false)
 }
 
 /// A panic is logged once and exits QEMU with status 1.
@@ -98,26 +51,16 @@ fn panic(info: &core::panic::PanicInfo) -> ! {
     if !PANICKED.swap(true, Ordering::Relaxed) {
         defmt::error!("panic: {}", defmt::Display2Format(info));
     }
-    debug::exit(debug::EXIT_FAILURE);
-    #[allow(clippy::empty_loop)]
-    loop {}
+    exit(false)
 }
 
 /// Starts TIM5 at 1 MHz ([`now_us`]) and TIM2 at 1 GHz ([`now_ns`]), free-running.
 pub fn start_time_bases(rcc: &pac::RCC, tim2: &pac::TIM2, tim5: &pac::TIM5) {
     rcc.apb1enr()
         .modify(|_, w| w.tim2en().set_bit().tim5en().set_bit());
-    free_running!(tim5, 999);
-    free_running!(tim2, 0);
+    firmware::free_running!(tim5, 999);
+    firmware::free_running!(tim2, 0);
 }
 
-/// Ends the QEMU run with `code` (0 success).
-pub fn exit(ok: bool) -> ! {
-    debug::exit(if ok {
-        debug::EXIT_SUCCESS
-    } else {
-        debug::EXIT_FAILURE
-    });
-    #[allow(clippy::empty_loop)]
-    loop {}
-}
+/// Ends the QEMU run: exit status 0 (`true`) or 1.
+pub use firmware::semihosting::exit;

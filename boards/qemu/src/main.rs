@@ -41,20 +41,6 @@ use stm32f4xx_hal::pac;
 /// The timing margins of this run (TIM2 counts: instructions under `-icount shift=0`).
 static MARGIN: firmware::Margin = firmware::Margin::new();
 
-/// What the control task asks of the VFD task after a step.
-#[derive(Clone, Copy)]
-struct Request {
-    t_ms: u32,
-    torque_pct: f32,
-}
-
-/// What the log task writes.
-enum LogMsg {
-    Line(controller::control::LogLine),
-    Error(&'static str),
-    Done { failed: bool },
-}
-
 #[rtic::app(device = stm32f4xx_hal::pac, peripherals = true, dispatchers = [EXTI0, EXTI1, EXTI2])]
 mod app {
     use super::*;
@@ -65,11 +51,12 @@ mod app {
     use controller::rtu::{NoDe, Rs485};
     use controller::types::Published;
     use firmware::port::{PortIsr, PortTask, RX_QUEUE, TX_QUEUE};
+    use firmware::tasks::{
+        log_task, scada_server, vfd_master, vfd_pass, LogMsg, LogWait, ScadaWait, ScadaWake,
+        StepLinks, VfdWait,
+    };
     use firmware::{record_max, Controller};
     use heapless::spsc::Queue;
-    use rtic_sync::channel::{Receiver, Sender};
-    use rtic_sync::signal::{SignalReader, SignalWriter};
-    use rtic_sync::{make_channel, make_signal};
     use stm32f4xx_hal::prelude::*;
     use stm32f4xx_hal::rcc::Config as RccConfig;
     use stm32f4xx_hal::serial::{Rx, Serial, Tx};
@@ -82,7 +69,6 @@ mod app {
     >;
     type Port1 = PortIsr<Tx<pac::USART1>, Rx<pac::USART1>, NoDe>;
     type Port2 = PortIsr<Tx<pac::USART2>, Rx<pac::USART2>, NoDe>;
-    const LOG_CAP: usize = 4;
 
     #[shared]
     struct Shared {
@@ -108,13 +94,11 @@ mod app {
         vfd_port: Option<PortTask>,
         scada: ScadaLink,
         vfd: VfdLink,
-        scada_wake: Sender<'static, (), 1>,
-        scada_wake_isr: Sender<'static, (), 1>,
-        scada_rx: Receiver<'static, (), 1>,
-        vfd_req: SignalWriter<'static, Request>,
-        vfd_wait: SignalReader<'static, Request>,
-        log_tx: Sender<'static, LogMsg, LOG_CAP>,
-        log_rx: Receiver<'static, LogMsg, LOG_CAP>,
+        step: StepLinks,
+        scada_wake_isr: ScadaWake,
+        scada_wait: ScadaWait,
+        vfd_wait: VfdWait,
+        log_wait: LogWait,
     }
 
     #[init(local = [
@@ -185,16 +169,9 @@ mod app {
             })
         });
 
-        let mut syst = cx.core.SYST;
-        syst.set_clock_source(cortex_m::peripheral::syst::SystClkSource::Core);
-        syst.set_reload(QEMU_SYSTICK_HZ / WAKE_HZ - 1);
-        syst.clear_current();
-        syst.enable_interrupt();
-        syst.enable_counter();
+        firmware::start_systick(cx.core.SYST, QEMU_SYSTICK_HZ / WAKE_HZ - 1);
 
-        let (scada_wake, scada_rx) = make_channel!((), 1);
-        let (vfd_req, vfd_wait) = make_signal!(Request);
-        let (log_tx, log_rx) = make_channel!(LogMsg, LOG_CAP);
+        let links = firmware::tasks::links();
         defmt::info!(
             "firmware: virtual bench, SCADA unit 1 on USART1, VFD {=str}, mode={=u16} setpoint={=u16} seed={=u32} narmax={=str}{=str}",
             if a.vfd_uart { "on USART2" } else { "virtual" },
@@ -225,13 +202,11 @@ mod app {
                 vfd_port,
                 scada,
                 vfd,
-                scada_wake_isr: scada_wake.clone(),
-                scada_wake,
-                scada_rx,
-                vfd_req,
-                vfd_wait,
-                log_tx,
-                log_rx,
+                step: links.step,
+                scada_wake_isr: links.scada_wake_isr,
+                scada_wait: links.scada_wait,
+                vfd_wait: links.vfd_wait,
+                log_wait: links.log_wait,
             },
         )
     }
@@ -264,12 +239,13 @@ mod app {
     /// Every elapsed millisecond of TIM5: one controller step, its outputs to the virtual
     /// bench, the bench stepped; then the links are woken with what the step left them.
     #[task(binds = SysTick, priority = 3,
-           local = [core, ms, run_ms, stopped, vfd_req, log_tx, scada_wake],
+           local = [core, ms, run_ms, stopped, step],
            shared = [io, commands, published, vfd_status])]
     fn control(mut cx: control::Context) {
         let t0 = now_ns();
         let now = cx.local.ms.now_ms(now_us());
         let core = cx.local.core;
+        let links = cx.local.step;
         while !*cx.local.stopped && now.wrapping_sub(core.now_ms()) as i32 >= 0 {
             let commands = cx.shared.commands.lock(|c| *c);
             let vfd = cx.shared.vfd_status.lock(|s| *s);
@@ -278,32 +254,17 @@ mod app {
                 Virtual::control(core, io, &inputs)
             });
             let Ok(out) = out else {
-                let _ = cx
-                    .local
-                    .log_tx
-                    .try_send(LogMsg::Error("the virtual bench diverged"));
-                let _ = cx.local.log_tx.try_send(LogMsg::Done { failed: true });
+                links.log(LogMsg::Error("the virtual bench diverged"));
+                links.log(LogMsg::Done { failed: true });
                 *cx.local.stopped = true;
                 break;
             };
-            cx.shared.published.lock(|p| *p = out.published);
-            // Latest only: when QEMU catches up several late steps in one run of this task,
-            // the VFD master's next pass takes the last step's request and time.
-            cx.local.vfd_req.write(Request {
-                t_ms: out.t_ms,
-                torque_pct: out.requested_torque_pct,
-            });
-            let _ = cx.local.scada_wake.try_send(());
-            MARGIN
-                .steps
-                .fetch_add(1, core::sync::atomic::Ordering::Relaxed);
-            if let Some(line) = out.log {
-                if cx.local.log_tx.try_send(LogMsg::Line(line)).is_err() {
-                    defmt::warn!("log line dropped (log task behind)");
-                }
-            }
+            // When QEMU catches up several late steps in one run of this task, the VFD
+            // master's next pass takes the last one's request and time.
+            let published = &mut cx.shared.published;
+            links.after_step(&out, &MARGIN, |p| published.lock(|x| *x = *p));
             if cx.local.run_ms.is_some_and(|end| out.t_ms + 1 >= end) {
-                let _ = cx.local.log_tx.try_send(LogMsg::Done { failed: false });
+                links.log(LogMsg::Done { failed: false });
                 *cx.local.stopped = true;
             }
         }
@@ -311,79 +272,30 @@ mod app {
     }
 
     /// The SCADA server: requests from USART1's queue, answers back to it.
-    #[task(priority = 1, local = [scada, scada_port, scada_rx], shared = [commands, published])]
+    #[task(priority = 1, local = [scada, scada_port, scada_wait], shared = [commands, published])]
     async fn scada(cx: scada::Context) {
-        let (mut published, mut commands) = (cx.shared.published, cx.shared.commands);
-        while cx.local.scada_rx.recv().await.is_ok() {
-            let dropped = firmware::port::serve_scada(
-                cx.local.scada_port,
-                cx.local.scada,
-                now_us(),
-                || published.lock(|p| *p),
-                |c| commands.lock(|x| *x = c),
-            );
-            if dropped > 0 {
-                defmt::warn!(
-                    "{=u32} SCADA answers dropped (transmit queue full)",
-                    dropped
-                );
-            }
-        }
+        let l = cx.local;
+        let (port, link) = (l.scada_port, l.scada);
+        let (published, commands) = (cx.shared.published, cx.shared.commands);
+        scada_server(l.scada_wait, port, link, now_us, published, commands).await
     }
 
     /// The VFD master: one pass after each control step, at its time, with its request (a
-    /// latest-only signal: after steps caught up at once, the last one).
+    /// latest-only signal: after steps caught up at once, the last one); over USART2 or to
+    /// the in-process drive.
     #[task(priority = 2, local = [vfd, vfd_port, vfd_wait], shared = [io, vfd_status])]
-    async fn vfd(mut cx: vfd::Context) {
-        loop {
-            let r = cx.local.vfd_wait.wait().await;
-            let link = &mut *cx.local.vfd;
-            match cx.local.vfd_port {
-                Some(port) => {
-                    port.now_us = now_us();
-                    link.poll(r.t_ms, r.torque_pct, port);
-                }
-                None => cx.shared.io.lock(|io| link.poll(r.t_ms, r.torque_pct, io)),
-            }
-            let s = link.status();
-            cx.shared.vfd_status.lock(|x| *x = s);
-        }
+    async fn vfd(cx: vfd::Context) {
+        let (link, port, mut io) = (cx.local.vfd, cx.local.vfd_port, cx.shared.io);
+        let pass = |r| match port {
+            Some(port) => vfd_pass(link, port.at(now_us()), r),
+            None => io.lock(|io| vfd_pass(link, io, r)),
+        };
+        vfd_master(cx.local.vfd_wait, pass, cx.shared.vfd_status).await
     }
 
     /// The log: the once-a-second line, the margins, errors; the exit at the end of `run_ms`.
-    #[task(priority = 1, local = [log_rx])]
+    #[task(priority = 1, local = [log_wait])]
     async fn log(cx: log::Context) {
-        while let Ok(msg) = cx.local.log_rx.recv().await {
-            match msg {
-                LogMsg::Line(line) => {
-                    let t0 = now_ns();
-                    defmt::info!("{}", line);
-                    record_max(&MARGIN.masked_max, now_ns().wrapping_sub(t0));
-                    let m = MARGIN.snapshot();
-                    defmt::info!(
-                        "margin: steps={=u32} control_max={=u32} usart_max={=u32} masked_max={=u32} rx_wait_bound={=u32} bytes={=u32} lost={=u32}",
-                        m.steps,
-                        m.control_max,
-                        m.usart_handler_max,
-                        m.masked_max,
-                        m.rx_wait_bound(),
-                        m.bytes_received,
-                        m.bytes_lost
-                    );
-                }
-                LogMsg::Error(what) => defmt::error!("{=str}", what),
-                LogMsg::Done { failed } => {
-                    let m = MARGIN.snapshot();
-                    defmt::info!(
-                        "done: steps={=u32} control_max={=u32} rx_wait_bound={=u32} lost={=u32}",
-                        m.steps,
-                        m.control_max,
-                        m.rx_wait_bound(),
-                        m.bytes_lost
-                    );
-                    exit(!failed && m.bytes_lost == 0);
-                }
-            }
-        }
+        exit(log_task(cx.local.log_wait, &MARGIN, now_ns).await)
     }
 }
