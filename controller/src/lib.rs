@@ -16,7 +16,6 @@
 //! - [`mod@bench`]: the virtual bench that stands in for the real one (QEMU, host tests).
 #![cfg_attr(not(test), no_std)]
 #![forbid(unsafe_code)]
-#![warn(missing_docs)]
 
 pub mod analog;
 pub mod bench;

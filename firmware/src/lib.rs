@@ -30,7 +30,6 @@
 //! The NARMAX models are the `pump-models` crate (compile-time data made by `pumpbench export`).
 #![no_std]
 #![forbid(unsafe_code)]
-#![warn(missing_docs)]
 
 #[cfg(test)]
 extern crate std;

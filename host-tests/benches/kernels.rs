@@ -1,6 +1,8 @@
 //! Host timing of the kernels the MCU runs, in f32 and f64 where both exist (criterion):
 //! `cargo bench -p host-tests --bench kernels`. The MCU's own counts (instructions under QEMU)
 //! come from `cargo xtask bench`; these are host nanoseconds, for the host tools.
+// `criterion_group!` makes a public function it does not document.
+#![allow(missing_docs)]
 use criterion::measurement::WallTime;
 use criterion::{criterion_group, criterion_main, BatchSize, BenchmarkGroup, Criterion};
 use model_core::narmax::mcu::{tanh_f32, tanh_q15, I16F16};

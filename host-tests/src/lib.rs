@@ -6,7 +6,6 @@
 //! flow from the closed-form roots of the cubic polished by bisection, and integrates with an
 //! adaptive Dormand-Prince 5(4) at a tight tolerance.
 #![forbid(unsafe_code)]
-#![warn(missing_docs)]
 // `!(x > 0.0)` is deliberate throughout: unlike `x <= 0.0` it is also true for NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 

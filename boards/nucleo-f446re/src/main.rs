@@ -57,6 +57,9 @@
 //! takes the VFD's input to 0 V) and resets the MCU, which starts stopped (mode 0). A control
 //! task that stops running is reset by the independent watchdog (≈ 68-190 ms).
 #![no_std]
+// The board is where the hardware is: register reads and writes the HAL does not wrap, the
+// fault handler. Each `unsafe` block says why it is sound.
+#![allow(unsafe_code)]
 #![no_main]
 
 use defmt_rtt as _;

@@ -10,13 +10,18 @@ use controller::types::{Arithmetic, Mode};
 
 /// Start-up options from the semihosting command line.
 pub struct Args {
+    /// Start-up mode (`mode=0|1|2`).
     pub mode: Mode,
+    /// Start-up setpoint, the SCADA register's 0.01 % units (`setpoint=0..10000`).
     pub setpoint: u16,
     /// Profile and bench seed: 32 bits, so that no 64-bit division (≈ 1.1 KB) is linked
     /// for printing it.
     pub seed: u32,
+    /// Stop QEMU after this many ms of loop time (`run_ms=N`); run forever without it.
     pub run_ms: Option<u32>,
+    /// The VFD on USART2 (`vfd=uart`) instead of the virtual drive.
     pub vfd_uart: bool,
+    /// The NARMAX arithmetic (`narmax=f32|q15`).
     pub arithmetic: Arithmetic,
 }
 

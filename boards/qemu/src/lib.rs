@@ -1,6 +1,9 @@
 //! What the QEMU board's binaries share: the time bases, the fault and panic handlers that
 //! report and exit QEMU with status 1, the start-up arguments.
 #![no_std]
+// The board is where the hardware is: register reads and writes the HAL does not wrap, the
+// fault handler. Each `unsafe` block says why it is sound.
+#![allow(unsafe_code)]
 
 pub mod args;
 

@@ -33,6 +33,9 @@
 //!   timers run on QEMU's clocks whatever the RCC says).
 //! - **DWT** (reads 0), **GPIO** (writes ignored), **IWDG** (not modelled: no watchdog here).
 #![no_std]
+// The board is where the hardware is: register reads and writes the HAL does not wrap, the
+// fault handler. Each `unsafe` block says why it is sound.
+#![allow(unsafe_code)]
 #![no_main]
 
 use board_qemu::{args, exit, now_ns, now_us, BAUD, QEMU_SILENCE_US, QEMU_SYSTICK_HZ, WAKE_HZ};
