@@ -116,6 +116,28 @@ pub mod inputs {
     }
 }
 
+/// A size probe's `main` and panic handler: runs the [`parts`] named, in turn, each only if
+/// the ones before passed, and exits 0 if all did (QEMU's exit status), 1 on failure or panic.
+/// `probe!()` links the runtime only.
+#[macro_export]
+macro_rules! probe {
+    ($($part:ident),*) => {
+        #[cortex_m_rt::entry]
+        fn main() -> ! {
+            $crate::parts::exit(
+                Ok::<(), $crate::parts::Error>(())
+                    $(.and_then(|()| $crate::parts::$part()))*
+                    .is_ok(),
+            )
+        }
+
+        #[panic_handler]
+        fn panic(_: &core::panic::PanicInfo) -> ! {
+            $crate::parts::exit(false)
+        }
+    };
+}
+
 /// What each size probe (`src/bin/part_*.rs`) links: each part uses one piece of model-core
 /// the way the controller does, on inputs it cannot see through ([`black_box`]); a probe calls
 /// the parts before its own, so that each image holds one piece more than the last.

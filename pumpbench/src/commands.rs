@@ -34,36 +34,23 @@ macro_rules! with_narmax {
 
 /// `pumpbench identify`.
 pub fn identify(a: IdentifyArgs) -> Result<(), Failure> {
-    let IdentifyArgs {
-        data,
-        target,
-        na,
-        nb,
-        nc,
-        nk,
-        hidden,
-        epochs,
-        seed,
-        starts,
-        output,
-    } = a;
-    output::check_outputs(&[("--data", &data)], &[("--output", &output)])?;
+    output::check_outputs(&[("--data", &a.data)], &[("--output", &a.output)])?;
     let o = narmaxcmd::Identify {
-        starts: starts as usize,
-        data: &data,
-        target,
+        starts: a.starts as usize,
+        data: &a.data,
+        target: a.target,
         structure: train::Structure {
-            na,
-            nb,
-            nc,
-            nk,
-            hidden,
+            na: a.na,
+            nb: a.nb,
+            nc: a.nc,
+            nk: a.nk,
+            hidden: a.hidden,
         },
-        epochs,
-        seed,
+        epochs: a.epochs,
+        seed: a.seed,
     };
     let model = narmaxcmd::run_identify(&o)?;
-    narmaxcmd::write_model(&output, &model)
+    narmaxcmd::write_model(&a.output, &model)
 }
 
 /// `pumpbench validate`.

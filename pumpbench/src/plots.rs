@@ -259,36 +259,42 @@ pub fn figures(dir: &Path, p: &TargetResult, q: &TargetResult) -> Result<(), Fai
         code: 1,
         message: format!("cannot draw {}: {e}", dir.join(name).display()),
     };
-    type Draw<'a> = &'a dyn Fn(&Path) -> Result<(), Box<dyn Error>>;
-    let draw = |i: usize, f: Draw| f(&dir.join(FIGURES[i])).map_err(|e| fail(FIGURES[i], e));
-    draw(0, &|path| {
-        let title = "NARMAX models, free run on the validation records (cf. paper Fig. 4)";
-        validation_figure(
-            path,
-            title,
-            [(p, &p.narmax), (q, &q.narmax)],
+    // Figures 0 and 2: free runs on the validation records; 1 and 3: static curves.
+    let runs = [
+        (
+            0,
+            "NARMAX models, free run on the validation records (cf. paper Fig. 4)",
+            [(p, &p.narmax[..]), (q, &q.narmax[..])],
             "NARMAX free run",
-        )
-    })?;
-    draw(1, &|path| {
-        let title = "NARMAX models, static curves (cf. paper Fig. 5)";
-        let curves = [(p, &p.narmax_curve[..]), (q, &q.narmax_curve[..])];
-        static_figure(path, title, curves, "NARMAX steady output")
-    })?;
-    draw(2, &|path| {
-        let title = "White-box model on the validation records (cf. paper Fig. 7)";
-        validation_figure(
-            path,
-            title,
-            [(p, &p.whitebox), (q, &q.whitebox)],
+        ),
+        (
+            2,
+            "White-box model on the validation records (cf. paper Fig. 7)",
+            [(p, &p.whitebox[..]), (q, &q.whitebox[..])],
             "white-box model",
-        )
-    })?;
-    draw(3, &|path| {
-        let title = "White-box model, static curves (cf. paper Fig. 8)";
-        let curves = [(p, &p.whitebox_curve[..]), (q, &q.whitebox_curve[..])];
-        static_figure(path, title, curves, "white-box steady state")
-    })?;
+        ),
+    ];
+    let curves = [
+        (
+            1,
+            "NARMAX models, static curves (cf. paper Fig. 5)",
+            [(p, &p.narmax_curve[..]), (q, &q.narmax_curve[..])],
+            "NARMAX steady output",
+        ),
+        (
+            3,
+            "White-box model, static curves (cf. paper Fig. 8)",
+            [(p, &p.whitebox_curve[..]), (q, &q.whitebox_curve[..])],
+            "white-box steady state",
+        ),
+    ];
+    for ((i, title, series, label), (j, c_title, c_series, c_label)) in runs.into_iter().zip(curves)
+    {
+        validation_figure(&dir.join(FIGURES[i]), title, series, label)
+            .map_err(|e| fail(FIGURES[i], e))?;
+        static_figure(&dir.join(FIGURES[j]), c_title, c_series, c_label)
+            .map_err(|e| fail(FIGURES[j], e))?;
+    }
     Ok(())
 }
 

@@ -51,6 +51,28 @@ fn identify_args<'a>(data: &'a str, output: &'a str) -> [&'a str; 17] {
     ]
 }
 
+/// The arguments of a `study` run on the given records into the folder `out`.
+fn study_args<'a>(
+    [train_pressure, train_flow, val, statics]: [&'a str; 4],
+    out: &'a str,
+) -> [&'a str; 13] {
+    [
+        "study",
+        "--train-pressure",
+        train_pressure,
+        "--train-flow",
+        train_flow,
+        "--val-pressure",
+        val,
+        "--val-flow",
+        val,
+        "--static",
+        statics,
+        "--out",
+        out,
+    ]
+}
+
 #[test]
 fn an_output_that_is_an_input_is_refused_and_the_input_kept() {
     let dir = tempfile::tempdir().unwrap();
@@ -131,23 +153,9 @@ fn an_output_that_is_an_input_is_refused_and_the_input_kept() {
             &m,
         ),
         (
-            [
-                "study",
-                "--train-pressure",
-                "out/table1.md",
-                "--train-flow",
-                &train,
-                "--val-pressure",
-                &train,
-                "--val-flow",
-                &train,
-                "--static",
-                &train,
-                "--out",
-                "out",
-            ]
-            .map(String::from)
-            .to_vec(),
+            study_args(["out/table1.md", &train, &train, &train], "out")
+                .map(String::from)
+                .to_vec(),
             &table,
         ),
     ];
@@ -246,21 +254,10 @@ fn study_checks_the_times_of_its_validation_records_as_simulate_does() {
         "torque_ref_pct,pressure_mca,flow_lps\n50,2,10\n",
     );
     let out = d.join("out");
-    let out = pumpbench(&[
-        "study",
-        "--train-pressure",
-        &train,
-        "--train-flow",
-        &train,
-        "--val-pressure",
-        &val,
-        "--val-flow",
-        &val,
-        "--static",
-        &statics,
-        "--out",
+    let out = pumpbench(&study_args(
+        [&train, &train, &val, &statics],
         out.to_str().unwrap(),
-    ]);
+    ));
     refused(
         &out,
         &[&format!(
@@ -338,21 +335,7 @@ fn unwritable_outputs_are_refused_before_any_work() {
     // study: a folder that cannot be made, or an output inside it that is a folder.
     std::fs::create_dir_all(d.join("res").join("pressure_model.json")).unwrap();
     for out_dir in [format!("{a_file}/sub"), d.join("res").display().to_string()] {
-        let out = pumpbench(&[
-            "study",
-            "--train-pressure",
-            &train,
-            "--train-flow",
-            &train,
-            "--val-pressure",
-            &train,
-            "--val-flow",
-            &train,
-            "--static",
-            &train,
-            "--out",
-            &out_dir,
-        ]);
+        let out = pumpbench(&study_args([&train, &train, &train, &train], &out_dir));
         let err = refused(&out, &[&out_dir], &out_dir);
         assert!(!err.contains("identif"), "{err}");
     }

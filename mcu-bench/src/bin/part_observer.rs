@@ -5,20 +5,4 @@
 #![no_std]
 #![no_main]
 
-use mcu_bench::parts;
-
-#[cortex_m_rt::entry]
-fn main() -> ! {
-    parts::exit(
-        parts::whitebox()
-            .and_then(|()| parts::narmax_f32())
-            .and_then(|()| parts::narmax_fixed())
-            .and_then(|()| parts::observer())
-            .is_ok(),
-    )
-}
-
-#[panic_handler]
-fn panic(_: &core::panic::PanicInfo) -> ! {
-    parts::exit(false)
-}
+mcu_bench::probe!(whitebox, narmax_f32, narmax_fixed, observer);

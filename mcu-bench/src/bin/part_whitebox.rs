@@ -5,14 +5,4 @@
 #![no_std]
 #![no_main]
 
-use mcu_bench::parts;
-
-#[cortex_m_rt::entry]
-fn main() -> ! {
-    parts::exit(parts::whitebox().is_ok())
-}
-
-#[panic_handler]
-fn panic(_: &core::panic::PanicInfo) -> ! {
-    parts::exit(false)
-}
+mcu_bench::probe!(whitebox);
