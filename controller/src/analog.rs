@@ -3,7 +3,7 @@
 //!
 //! - Decoding, as the controller's inputs do ([`AnalogInput`]): ADC code → loop current →
 //!   NAMUR NE 43 status → engineering value.
-//! - Encoding, as the virtual bench (`crate::bench`) and `pumpbench bench-data` make their
+//! - Encoding, as the virtual bench (`crate::virtual_bench`) and `pumpbench bench-data` make their
 //!   readings: value + [`noise`] → loop current with the transmitter's span, saturated at NE
 //!   43's measuring range ([`LoopConfig::transmitter_ma`]) → ADC code
 //!   ([`LoopConfig::code`]).

@@ -13,12 +13,11 @@
 //!   white-box and NARMAX models, the observer and the alarms;
 //! - [`protect`]: the protections that trip the torque to 0 % (dry run, overspeed, no flow);
 //! - [`link`]: the SCADA server and the VFD master that run apart from the core;
-//! - [`mod@bench`]: the virtual bench that stands in for the real one (QEMU, host tests).
+//! - [`virtual_bench`]: the virtual bench that stands in for the real one (QEMU, host tests).
 #![cfg_attr(not(test), no_std)]
 #![forbid(unsafe_code)]
 
 pub mod analog;
-pub mod bench;
 pub mod control;
 pub mod link;
 pub mod modbus;
@@ -28,3 +27,4 @@ pub mod scada;
 pub mod types;
 pub mod vfd;
 pub mod vfdsim;
+pub mod virtual_bench;

@@ -2,11 +2,11 @@
 //! The 1 ms loop on the virtual bench, on the host: operating point, VFD link alarm,
 //! transmitter faults, the profile, the arithmetic switch and the SCADA registers.
 
-use controller::bench::{VirtualBenchConfig, VirtualBoard, VirtualIo};
 use controller::control::{Config, LogLine, NarmaxModel};
 use controller::link::VfdPort;
 use controller::modbus::{crc16, Frame};
 use controller::types::{Arithmetic, Mode, Status};
+use controller::virtual_bench::{VirtualBenchConfig, VirtualBoard, VirtualIo};
 use model_core::WhiteBox;
 
 use pump_models::{flow as flow_model, pressure as pressure_model};
@@ -727,7 +727,7 @@ fn one_stop_write_acknowledges_a_cured_dry_run() {
 /// lighter load, a more open valve, slower transmitters).
 #[test]
 fn no_trip_in_30_minutes_of_pulses() {
-    use controller::bench::VirtualBenchConfig;
+    use controller::virtual_bench::VirtualBenchConfig;
     let other = VirtualBenchConfig {
         inertia_factor: 1.3,
         load_torque_factor: 0.94,

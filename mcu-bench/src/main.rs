@@ -17,9 +17,9 @@
 #![no_std]
 #![no_main]
 
-use controller::bench::{VirtualBenchConfig, VirtualBoard};
 use controller::control::{Config, NarmaxModel};
 use controller::types::Mode;
+use controller::virtual_bench::{VirtualBenchConfig, VirtualBoard};
 use core::fmt::Write;
 use core::hint::black_box;
 use cortex_m_rt::entry;

@@ -1,14 +1,14 @@
 //! `pumpbench vfd-sim`: a simulated VFD on a serial port: a Modbus RTU slave with the
 //! controller's VFD register map ([`controller::vfdsim::VfdSim`], the code the firmware's
-//! virtual bench runs) driving a virtual bench ([`controller::bench::VirtualBench`]) in real
+//! virtual bench runs) driving a virtual bench ([`controller::virtual_bench::VirtualBench`]) in real
 //! time with the torque reference it is written.
 
 use crate::error::Failure;
-use controller::bench::{VirtualBench, VirtualBenchConfig};
 use controller::modbus::Frame;
 use controller::rtu::RtuFramer;
 use controller::vfd::VfdMap;
 use controller::vfdsim::{DriveValues, VfdSim};
+use controller::virtual_bench::{VirtualBench, VirtualBenchConfig};
 use nix::sys::termios::{self, SetArg};
 use std::fs::{File, OpenOptions};
 use std::io::{ErrorKind, Read, Write};

@@ -15,7 +15,7 @@ use pump_models::{flow as flow_model, pressure as pressure_model};
 pub fn selftest() -> Result<String> {
     let elf = target_dir().join(TARGET).join("firmware").join("selftest");
     let log = qemu_log(&elf, &[])?;
-    let mut report = check_selftest_log(&log, &firmware::selftest::digests())?;
+    let mut report = check_selftest_log(&log, &board_common::selftest::digests())?;
     let (ok, fault) = qemu_log_status(&elf, &["fault".into()])?;
     check_fault_run(ok, &fault)?;
     report.push_str("on target: a bus fault is reported (HardFault at pc=…) and QEMU exits 1\n");
@@ -76,9 +76,9 @@ fn check_fault_run(ok: bool, fault: &str) -> Result {
 /// order), with the options the firmware announces in its header line.
 /// Returns the log lines it makes for the ticks `0..=run_ms`.
 fn host_replay(header: &str, run_ms: u32) -> Result<Vec<String>> {
-    use controller::bench::{VirtualBenchConfig, VirtualBoard};
     use controller::control::{Config, NarmaxModel};
     use controller::types::{Arithmetic, Mode};
+    use controller::virtual_bench::{VirtualBenchConfig, VirtualBoard};
     let seed: u64 = num(header, "seed")?;
     let mode = match num::<u8>(header, "mode")? {
         0 => Mode::Stop,
@@ -302,7 +302,7 @@ mod tests {
         assert!(check_selftest_log(&good.replace(" 0 failed", " 10 failed"), &digests).is_err());
         assert!(check_selftest_log(&good.replace("selftest:", "self test:"), &digests).is_err());
         // The host's own digests, as the target prints them, pass.
-        let host = firmware::selftest::digests();
+        let host = board_common::selftest::digests();
         let mut printed = String::new();
         for (name, d) in host {
             printed.push_str(&format!("digest {name}={d:#010x}\n"));

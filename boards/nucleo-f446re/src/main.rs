@@ -6,7 +6,7 @@
 //! | priority | task | here |
 //! |---|---|---|
 //! | 4 | `usart1`, `usart6` (RXNE, TC) and `tim6`, `tim7` (the RTU gap) | bytes into and out of `heapless` queues |
-//! | 3 | `control` (SysTick, 1 kHz) | one [`firmware::Controller`] step, ADC, DAC, watchdog, LED |
+//! | 3 | `control` (SysTick, 1 kHz) | one [`board_common::Controller`] step, ADC, DAC, watchdog, LED |
 //! | 2 | `vfd` | the VFD master, one pass per step |
 //! | 1 | `scada`, `log` | the SCADA server, defmt lines |
 //! | idle | | `wfi` |
@@ -92,11 +92,11 @@ fn cycles() -> u32 {
 }
 
 // HardFault (a stack overflow too: see the trampoline).
-firmware::hard_fault_trampoline!(hard_fault);
+board_common::hard_fault_trampoline!(hard_fault);
 
 /// Takes the torque reference to 0 V, logs the fault (`None`: a stack overflow) and resets
 /// the MCU.
-fn hard_fault(ef: Option<&firmware::fault::ExceptionFrame>) -> ! {
+fn hard_fault(ef: Option<&board_common::fault::ExceptionFrame>) -> ! {
     // SAFETY: the DAC's control and data registers, written once with every task stopped
     // (a HardFault preempts them all): channel 1 off, its code 0.
     unsafe {
@@ -104,29 +104,29 @@ fn hard_fault(ef: Option<&firmware::fault::ExceptionFrame>) -> ! {
         dac.dhr12r1().write(|w| w.daccdhr().set(0));
         dac.cr().modify(|_, w| w.en1().clear_bit());
     }
-    firmware::fault::report(ef);
+    board_common::fault::report(ef);
     defmt::error!("torque reference off, reset");
     cortex_m::peripheral::SCB::sys_reset()
 }
 
 /// The timing margins (DWT cycles at 180 MHz).
-static MARGIN: firmware::Margin = firmware::Margin::new();
+static MARGIN: board_common::Margin = board_common::Margin::new();
 
 #[rtic::app(device = stm32f4xx_hal::pac, peripherals = true, dispatchers = [EXTI0, EXTI1, EXTI2])]
 mod app {
     use super::*;
+    use board_common::dac::{torque_code, DAC12_FULL_SCALE};
+    use board_common::port::{PortIsr, PortTask, RX_QUEUE, TX_QUEUE};
+    use board_common::tasks::{
+        log_task, scada_server, vfd_master, vfd_pass, LogWait, ScadaWait, ScadaWake, StepLinks,
+        VfdWait,
+    };
+    use board_common::{record_max, Controller};
     use controller::control::{Commands, Config, Inputs, VfdStatus};
     use controller::link::{ScadaLink, VfdLink};
     use controller::modbus::Frame;
     use controller::rtu::{gap_us, Rs485};
     use controller::types::Published;
-    use firmware::dac::{torque_code, DAC12_FULL_SCALE};
-    use firmware::port::{PortIsr, PortTask, RX_QUEUE, TX_QUEUE};
-    use firmware::tasks::{
-        log_task, scada_server, vfd_master, vfd_pass, LogWait, ScadaWait, ScadaWake, StepLinks,
-        VfdWait,
-    };
-    use firmware::{record_max, Controller};
     use heapless::spsc::Queue;
     use stm32f4xx_hal::{
         adc::{
@@ -225,7 +225,7 @@ mod app {
         let config = Config::bench();
         // A configuration the controller refuses is a build-time mistake: panic-probe logs
         // it and the HardFault handler resets with the torque reference off.
-        let core = firmware::build_controller(&config).unwrap_or_else(|_| panic!("controller"));
+        let core = board_common::build_controller(&config).unwrap_or_else(|_| panic!("controller"));
         let scada = ScadaLink::new(&config).unwrap_or_else(|_| panic!("SCADA"));
         let vfd = VfdLink::new(config.vfd).unwrap_or_else(|_| panic!("VFD map"));
 
@@ -241,7 +241,7 @@ mod app {
                 .apb1enr()
                 .modify(|_, w| w.tim5en().set_bit())
         };
-        firmware::free_running!(&dp.TIM5, 89);
+        board_common::free_running!(&dp.TIM5, 89);
         cp.DCB.enable_trace();
         cp.DWT.enable_cycle_counter();
 
@@ -317,9 +317,9 @@ mod app {
             rtic::pend(pac::Interrupt::USART6)
         });
 
-        firmware::start_systick(cp.SYST, SYSCLK_HZ / 1000 - 1);
+        board_common::start_systick(cp.SYST, SYSCLK_HZ / 1000 - 1);
 
-        let links = firmware::tasks::links();
+        let links = board_common::tasks::links();
 
         // The watchdog last, so that a slow start-up cannot reset the board in a loop;
         // frozen while a debugger halts the core.

@@ -37,11 +37,11 @@ pub fn now_ns() -> u32 {
 
 // Fault report: the HardFault handler's frame (or a stack overflow caught by flip-link's
 // layout), logged, then QEMU exits with status 1.
-firmware::hard_fault_trampoline!(hard_fault);
+board_common::hard_fault_trampoline!(hard_fault);
 
 /// Logs the fault and exits QEMU with status 1 (`None`: a stack overflow).
-fn hard_fault(ef: Option<&firmware::fault::ExceptionFrame>) -> ! {
-    firmware::fault::report(ef);
+fn hard_fault(ef: Option<&board_common::fault::ExceptionFrame>) -> ! {
+    board_common::fault::report(ef);
     exit(false)
 }
 
@@ -61,9 +61,9 @@ fn panic(info: &core::panic::PanicInfo) -> ! {
 pub fn start_time_bases(rcc: &pac::RCC, tim2: &pac::TIM2, tim5: &pac::TIM5) {
     rcc.apb1enr()
         .modify(|_, w| w.tim2en().set_bit().tim5en().set_bit());
-    firmware::free_running!(tim5, 999);
-    firmware::free_running!(tim2, 0);
+    board_common::free_running!(tim5, 999);
+    board_common::free_running!(tim2, 0);
 }
 
 /// Ends the QEMU run: exit status 0 (`true`) or 1.
-pub use firmware::semihosting::exit;
+pub use board_common::semihosting::exit;

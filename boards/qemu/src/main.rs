@@ -4,7 +4,7 @@
 //! | priority | task | here |
 //! |---|---|---|
 //! | 4 | `usart1`, `usart2` | SCADA and VFD bytes into `heapless` queues, frames out |
-//! | 3 | `control` (SysTick) | one [`firmware::Controller`] step per elapsed ms, the virtual bench stepped |
+//! | 3 | `control` (SysTick) | one [`board_common::Controller`] step per elapsed ms, the virtual bench stepped |
 //! | 2 | `vfd` | the VFD master, one pass per step |
 //! | 1 | `scada`, `log` | the SCADA server, defmt lines |
 //! | idle | | `wfi` |
@@ -42,33 +42,33 @@ use board_qemu::{args, exit, now_ns, now_us, BAUD, QEMU_SILENCE_US, QEMU_SYSTICK
 use stm32f4xx_hal::pac;
 
 /// The timing margins of this run (TIM2 counts: instructions under `-icount shift=0`).
-static MARGIN: firmware::Margin = firmware::Margin::new();
+static MARGIN: board_common::Margin = board_common::Margin::new();
 
 #[rtic::app(device = stm32f4xx_hal::pac, peripherals = true, dispatchers = [EXTI0, EXTI1, EXTI2])]
 mod app {
     use super::*;
-    use controller::bench::{VirtualBench, VirtualBenchConfig, VirtualBoard, VirtualIo};
+    use board_common::port::{PortIsr, PortTask, RX_QUEUE, TX_QUEUE};
+    use board_common::tasks::{
+        log_task, scada_server, vfd_master, vfd_pass, LogMsg, LogWait, ScadaWait, ScadaWake,
+        StepLinks, VfdWait,
+    };
+    use board_common::{record_max, Controller};
     use controller::control::{Commands, Config, VfdStatus};
     use controller::link::{ScadaLink, VfdLink};
     use controller::modbus::{request_at_end, Frame};
     use controller::rtu::{NoDe, Rs485};
     use controller::types::Published;
-    use firmware::port::{PortIsr, PortTask, RX_QUEUE, TX_QUEUE};
-    use firmware::tasks::{
-        log_task, scada_server, vfd_master, vfd_pass, LogMsg, LogWait, ScadaWait, ScadaWake,
-        StepLinks, VfdWait,
-    };
-    use firmware::{record_max, Controller};
+    use controller::virtual_bench::{VirtualBench, VirtualBenchConfig, VirtualBoard, VirtualIo};
     use heapless::spsc::Queue;
     use stm32f4xx_hal::prelude::*;
     use stm32f4xx_hal::rcc::Config as RccConfig;
     use stm32f4xx_hal::serial::{Rx, Serial, Tx};
 
     type Virtual = VirtualBoard<
-        { firmware::models::pressure::FRAMES },
-        { firmware::models::pressure::HIDDEN },
-        { firmware::models::flow::FRAMES },
-        { firmware::models::flow::HIDDEN },
+        { board_common::models::pressure::FRAMES },
+        { board_common::models::pressure::HIDDEN },
+        { board_common::models::flow::FRAMES },
+        { board_common::models::flow::HIDDEN },
     >;
     type Port1 = PortIsr<Tx<pac::USART1>, Rx<pac::USART1>, NoDe>;
     type Port2 = PortIsr<Tx<pac::USART2>, Rx<pac::USART2>, NoDe>;
@@ -88,7 +88,7 @@ mod app {
     #[local]
     struct Local {
         core: Controller,
-        ms: firmware::MsClock,
+        ms: board_common::MsClock,
         run_ms: Option<u32>,
         stopped: bool,
         port1: Port1,
@@ -134,7 +134,7 @@ mod app {
             defmt::error!("cannot start: {=str}", what);
             exit(false)
         };
-        let core = firmware::build_controller(&config).unwrap_or_else(|_| fail("controller"));
+        let core = board_common::build_controller(&config).unwrap_or_else(|_| fail("controller"));
         let scada = ScadaLink::new(&config).unwrap_or_else(|_| fail("SCADA"));
         let vfd = VfdLink::new(config.vfd).unwrap_or_else(|_| fail("VFD link"));
         let bench = VirtualBench::new(VirtualBenchConfig::default_offsets(u64::from(a.seed)))
@@ -172,9 +172,9 @@ mod app {
             })
         });
 
-        firmware::start_systick(cx.core.SYST, QEMU_SYSTICK_HZ / WAKE_HZ - 1);
+        board_common::start_systick(cx.core.SYST, QEMU_SYSTICK_HZ / WAKE_HZ - 1);
 
-        let links = firmware::tasks::links();
+        let links = board_common::tasks::links();
         defmt::info!(
             "firmware: virtual bench, SCADA unit 1 on USART1, VFD {=str}, mode={=u16} setpoint={=u16} seed={=u32} narmax={=str}{=str}",
             if a.vfd_uart { "on USART2" } else { "virtual" },
@@ -196,7 +196,7 @@ mod app {
             },
             Local {
                 core,
-                ms: firmware::MsClock::new(now_us()),
+                ms: board_common::MsClock::new(now_us()),
                 run_ms: a.run_ms,
                 stopped: false,
                 port1,

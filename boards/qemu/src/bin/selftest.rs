@@ -12,8 +12,8 @@
 #![allow(unsafe_code)]
 #![no_main]
 
+use board_common::selftest;
 use board_qemu::{args::command_line, exit};
-use firmware::selftest;
 use stm32f4xx_hal as _; // the device's interrupt vectors
 
 #[cortex_m_rt::entry]

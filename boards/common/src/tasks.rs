@@ -260,9 +260,9 @@ pub fn log(msg: LogMsg, margin: &Margin, clock: impl Fn() -> u32) -> Option<bool
 #[cfg(test)]
 mod tests {
     use super::*;
-    use controller::bench::{VirtualBench, VirtualBenchConfig, VirtualIo};
     use controller::control::Config;
     use controller::types::{Arithmetic, Mode};
+    use controller::virtual_bench::{VirtualBench, VirtualBenchConfig, VirtualIo};
     use core::future::Future;
     use core::pin::pin;
     use core::task::{Context, Poll, Waker};

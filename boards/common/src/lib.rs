@@ -25,7 +25,7 @@
 //! control task's longest run.
 //!
 //! Everything but the target-only parts (`hard_fault_trampoline!` and `fault`, `semihosting`,
-//! `start_systick`) is plain `no_std` code, tested on the host (`cargo test -p firmware`).
+//! `start_systick`) is plain `no_std` code, tested on the host (`cargo test -p board-common`).
 //!
 //! The NARMAX models are the `pump-models` crate (compile-time data made by `pumpbench export`).
 #![no_std]
