@@ -19,8 +19,7 @@ pub struct NarxF32<const F: usize, const H: usize> {
     y_gain: f32,
     y_offset: f32,
     /// Physical = scaled · std + mean, for y.
-    y_std: f32,
-    y_mean: f32,
+    y_scale: Scaling<f32>,
     /// Scaled training ranges.
     u_range: [f32; 2],
     y_range: [f32; 2],
@@ -88,8 +87,10 @@ impl<const F: usize, const H: usize> NarxF32<F, H> {
             u_offset: (-m.u_scale.mean / m.u_scale.std) as f32,
             y_gain: (1.0 / m.y_scale.std) as f32,
             y_offset: (-m.y_scale.mean / m.y_scale.std) as f32,
-            y_std: m.y_scale.std as f32,
-            y_mean: m.y_scale.mean as f32,
+            y_scale: Scaling {
+                mean: m.y_scale.mean as f32,
+                std: m.y_scale.std as f32,
+            },
             u_range: [u[0] as f32, u[1] as f32],
             y_range: [y[0] as f32, y[1] as f32],
             used_y: m.used(0),
@@ -103,6 +104,15 @@ impl<const F: usize, const H: usize> NarxF32<F, H> {
             Ok(x) => x,
             Err(e) => build_error(e),
         }
+    }
+
+    /// The frame `[y, u]` of a measured sample (u(t), y(t)), each scaled and clamped to its
+    /// training range, with y's and u's clamp flags.
+    #[inline(always)]
+    fn frame(&self, u: f32, y: f32) -> ([f32; 2], bool, bool) {
+        let (zu, cu) = enter_f32(u, self.u_gain, self.u_offset, self.u_range);
+        let (zy, cy) = enter_f32(y, self.y_gain, self.y_offset, self.y_range);
+        ([zy, zu], cy, cu)
     }
 
     /// The network's scaled output for the current window.
@@ -137,22 +147,17 @@ impl<const F: usize, const H: usize> Predictor for NarxF32<F, H> {
     }
 
     fn output_scaling(&self) -> Scaling<f32> {
-        Scaling {
-            mean: self.y_mean,
-            std: self.y_std,
-        }
+        self.y_scale
     }
 
     fn state_at(&self, u: f32, y: f32) -> NarxF32State<F> {
-        let (zu, cu) = enter_f32(u, self.u_gain, self.u_offset, self.u_range);
-        let (zy, cy) = enter_f32(y, self.y_gain, self.y_offset, self.y_range);
-        NarxF32State(Ring::filled([zy, zu], cy, cu))
+        let (v, cy, cu) = self.frame(u, y);
+        NarxF32State(Ring::filled(v, cy, cu))
     }
 
     fn seed(&self, st: &mut NarxF32State<F>, u: f32, y: f32) {
-        let (zu, cu) = enter_f32(u, self.u_gain, self.u_offset, self.u_range);
-        let (zy, cy) = enter_f32(y, self.y_gain, self.y_offset, self.y_range);
-        st.0.push([zy, zu], cy, cu);
+        let (v, cy, cu) = self.frame(u, y);
+        st.0.push(v, cy, cu);
     }
 
     /// The measurement enters the history scaled and clamped; in free run ŷ(t) clamped to
@@ -168,7 +173,7 @@ impl<const F: usize, const H: usize> Predictor for NarxF32<F, H> {
         };
         st.0.push([zy, zu], cy, cu);
         NarmaxOutput {
-            y: z * self.y_std + self.y_mean,
+            y: z * self.y_scale.std + self.y_scale.mean,
             clamped,
         }
     }

@@ -29,8 +29,7 @@ pub struct NarxQ15<const F: usize, const H: usize> {
     /// Settled output: 1 LSB of y's code, physical units.
     y_lsb: f32,
     /// The output's training mean and standard deviation, physical units.
-    y_mean: f32,
-    y_std: f32,
+    y_scale: Scaling<f32>,
     used_y: u32,
     used_u: u32,
 }
@@ -243,8 +242,10 @@ impl<const F: usize, const H: usize> NarxQ15<F, H> {
             y_gain: (32768.0 / (ys.std * h[0])) as f32,
             y_offset: (-32768.0 * (ys.mean / ys.std + c[0]) / h[0]) as f32,
             y_lsb: (ys.std * h[0] / 32768.0) as f32,
-            y_mean: ys.mean as f32,
-            y_std: ys.std as f32,
+            y_scale: Scaling {
+                mean: ys.mean as f32,
+                std: ys.std as f32,
+            },
             used_y: m.used(0),
             used_u: m.used(1),
         };
@@ -267,6 +268,15 @@ impl<const F: usize, const H: usize> NarxQ15<F, H> {
             Ok(x) => x,
             Err(e) => build_error(e),
         }
+    }
+
+    /// The frame word of a measured sample (u(t), y(t)): y's and u's Q15 codes, and their
+    /// clamp flags.
+    #[inline(always)]
+    fn codes(&self, u: f32, y: f32) -> (u32, bool, bool) {
+        let (qu, cu) = enter_q15(u, self.u_gain, self.u_offset);
+        let (qy, cy) = enter_q15(y, self.y_gain, self.y_offset);
+        (frame(qy, qu), cy, cu)
     }
 
     /// The output accumulator for the current window (y's Q15 code · 2^(shift2)).
@@ -337,22 +347,17 @@ impl<const F: usize, const H: usize> Predictor for NarxQ15<F, H> {
     }
 
     fn output_scaling(&self) -> Scaling<f32> {
-        Scaling {
-            mean: self.y_mean,
-            std: self.y_std,
-        }
+        self.y_scale
     }
 
     fn state_at(&self, u: f32, y: f32) -> NarxQ15State<F> {
-        let (qu, cu) = enter_q15(u, self.u_gain, self.u_offset);
-        let (qy, cy) = enter_q15(y, self.y_gain, self.y_offset);
-        NarxQ15State(Ring::filled(frame(qy, qu), cy, cu))
+        let (word, cy, cu) = self.codes(u, y);
+        NarxQ15State(Ring::filled(word, cy, cu))
     }
 
     fn seed(&self, st: &mut NarxQ15State<F>, u: f32, y: f32) {
-        let (qu, cu) = enter_q15(u, self.u_gain, self.u_offset);
-        let (qy, cy) = enter_q15(y, self.y_gain, self.y_offset);
-        st.0.push(frame(qy, qu), cy, cu);
+        let (word, cy, cu) = self.codes(u, y);
+        st.0.push(word, cy, cu);
     }
 
     /// The measurement's code enters the history; in free run ŷ(t)'s code, saturated.
