@@ -19,7 +19,7 @@
 //! The noise is [`crate::analog::noise`]: the sum of four uniform draws (SplitMix64), scaled
 //! to unit variance.
 
-use crate::analog::{noise, LoopConfig, FLOW_LOOP, PRESSURE_LOOP};
+use crate::analog::{self, noise, LoopConfig, FLOW_LOOP, PRESSURE_LOOP};
 use crate::control::{
     Commands, Config, Controller, Error, Inputs, NarmaxModel, Outputs, VfdStatus,
 };
@@ -186,12 +186,18 @@ impl VirtualBench {
         } else {
             self.bench.step(&mut self.state, u, 1e-3, Scheme::Rk4)?;
         }
-        // First-order transmitter lags (exact discretisation at 1 ms needs exp; the forward
-        // form is within 0.1 % of it for lags ≥ 20 ms).
-        let lag = |tau: f32| if tau > 1e-3 { 1e-3 / tau } else { 1.0 };
-        self.pressure_seen +=
-            (self.state_pressure() - self.pressure_seen) * lag(self.config.pressure_lag_s);
-        self.flow_seen += (self.state.flow_lps - self.flow_seen) * lag(self.config.flow_lag_s);
+        // The transmitters' first-order lags, forward Euler at 1 ms (no `exp` on the MCU).
+        let pressure = self.state_pressure();
+        analog::lag_1ms(
+            &mut self.pressure_seen,
+            pressure,
+            self.config.pressure_lag_s,
+        );
+        analog::lag_1ms(
+            &mut self.flow_seen,
+            self.state.flow_lps,
+            self.config.flow_lag_s,
+        );
         Ok(())
     }
 

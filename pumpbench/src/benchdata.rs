@@ -101,13 +101,10 @@ impl Transmitter {
         }
     }
 
-    /// Advances the lag state `x` toward `target` over `h` seconds (exact for a held target).
+    /// Advances the lag state `x` toward `target` over `h` seconds (the transmitter's lag,
+    /// [`analog::lag_exact`]: exact for a held target).
     fn lag(&self, x: &mut f64, target: f64, h: f64) {
-        if self.tau_s <= 0.0 {
-            *x = target;
-        } else {
-            *x += (1.0 - (-h / self.tau_s).exp()) * (target - *x);
-        }
+        analog::lag_exact(x, target, h, self.tau_s);
     }
 }
 
