@@ -220,14 +220,5 @@ pub mod parts {
 
     /// Ends the program (QEMU exits 0 on success, 1 on failure); a probe's panic handler
     /// calls it too.
-    pub fn exit(ok: bool) -> ! {
-        use cortex_m_semihosting::debug;
-        debug::exit(if ok {
-            debug::EXIT_SUCCESS
-        } else {
-            debug::EXIT_FAILURE
-        });
-        #[allow(clippy::empty_loop)]
-        loop {}
-    }
+    pub use board_common::semihosting::exit;
 }
