@@ -28,6 +28,7 @@ use crate::modbus::Frame;
 use crate::vfd::VfdMap;
 use crate::vfdsim::{DriveValues, VfdSim};
 use model_core::equations::valve_pressure_mca;
+use model_core::units::applied_torque_pct;
 use model_core::excitation::SplitMix64;
 use model_core::{BenchError, BenchParams, BenchState, Scheme, Signals, WhiteBox};
 
@@ -159,14 +160,11 @@ impl VirtualBench {
         self.delivered_pct
     }
 
-    /// Advances the bench by 1 ms with the torque reference `torque_pct` (clamped to
-    /// 0..=100 %, NaN as 0) to its drive, which delivers it below its speed limit.
+    /// Advances the bench by 1 ms with the torque reference `torque_pct` (the torque rule,
+    /// [`applied_torque_pct`]: 0..=100 %, NaN as 0) to its drive, which delivers it below its
+    /// speed limit.
     pub fn step_1ms(&mut self, torque_pct: f32) -> Result<(), BenchError> {
-        let reference = if torque_pct.is_nan() {
-            0.0
-        } else {
-            torque_pct.clamp(0.0, 100.0)
-        };
+        let reference = applied_torque_pct(torque_pct);
         let over = self.state.speed_rpm - self.config.drive_speed_limit_rpm;
         let u = if over > 0.0 {
             reference * (1.0 - over / DRIVE_SPEED_LIMIT_BAND_RPM).max(0.0)
@@ -179,9 +177,10 @@ impl VirtualBench {
             let p = self.bench.params();
             let te = model_core::equations::electromagnetic_torque_pct(&p.gamma, u);
             let w = self.state.speed_rpm;
-            let friction = p.beta[8] * w + p.beta[9];
+            let friction = model_core::equations::dry_friction_torque_pct(&p.beta, w);
             let accel = self.bench.accel_rpm_per_s_per_pct();
-            self.state.speed_rpm = (w + 1e-3 * accel * (te - friction)).clamp(0.0, 6000.0);
+            let rate = model_core::equations::speed_derivative_rpm_per_s(te, friction, accel);
+            self.state.speed_rpm = (w + 1e-3 * rate).clamp(0.0, 6000.0);
             self.state.flow_lps = 0.0;
         } else {
             self.bench.step(&mut self.state, u, 1e-3, Scheme::Rk4)?;
@@ -304,13 +303,9 @@ impl VirtualIo {
 }
 
 impl VirtualIo {
-    /// Sets the torque output, % (NaN → 0, clamped to 0..=100).
+    /// Sets the torque output, % (the torque rule, [`applied_torque_pct`]: 0..=100 %, NaN → 0).
     pub fn set_torque_ref(&mut self, pct: f32) {
-        self.torque_pct = if pct.is_nan() {
-            0.0
-        } else {
-            pct.clamp(0.0, 100.0)
-        };
+        self.torque_pct = applied_torque_pct(pct);
     }
 }
 

@@ -139,6 +139,13 @@ pub fn load_torque_pct<T: Real>(beta: &[T; 10], speed_rpm: T, flow_lps: T) -> T 
     CubicInFlow::from_poly(beta, speed_rpm).eval(flow_lps)
 }
 
+/// The part of eq. (6) a dry pump meets: the friction terms `β9 ω + β10` (b ω + Tc of eq. 3),
+/// % of nominal torque, with no water to move (the virtual bench's dry run).
+#[inline]
+pub fn dry_friction_torque_pct<T: Real>(beta: &[T; 10], speed_rpm: T) -> T {
+    beta[8] * speed_rpm + beta[9]
+}
+
 /// Eq. (7): pressure loss in the fixed pipe, `F_pipeline(Q) = k1 Q²`, in mca (Q in l/s).
 #[inline]
 pub fn pipe_loss_mca<T: Real>(pipe_k1: T, flow_lps: T) -> T {

@@ -1,6 +1,8 @@
 //! The torque reference as a DAC code: the analog output a board drives into the VFD's
 //! torque input (on the Nucleo: DAC channel 1, 0-3.3 V, amplified ×3.03 to the VFD's 0-10 V).
 
+use model_core::units::applied_torque_pct;
+
 /// Full scale of a 12-bit DAC, code (the STM32F4's DAC in 12-bit right-aligned mode).
 pub const DAC12_FULL_SCALE: u16 = 4095;
 
@@ -9,8 +11,8 @@ pub const DAC12_FULL_SCALE: u16 = 4095;
 /// code (halves up). Below 0 % gives 0 and above 100 % gives `full_scale` (+∞ too); NaN
 /// gives 0, the torque off.
 pub fn torque_code(torque_pct: f32, full_scale: u16) -> u16 {
-    // `as` saturates and takes NaN to 0.
-    (torque_pct.clamp(0.0, 100.0) / 100.0 * f32::from(full_scale) + 0.5) as u16
+    // The torque rule (NaN → 0, clamped to 0..=100 %), then the code.
+    (applied_torque_pct(torque_pct) / 100.0 * f32::from(full_scale) + 0.5) as u16
 }
 
 #[cfg(test)]
