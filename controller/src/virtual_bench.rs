@@ -28,8 +28,8 @@ use crate::modbus::Frame;
 use crate::vfd::VfdMap;
 use crate::vfdsim::{DriveValues, VfdSim};
 use model_core::equations::valve_pressure_mca;
-use model_core::units::applied_torque_pct;
 use model_core::excitation::SplitMix64;
+use model_core::units::applied_torque_pct;
 use model_core::{BenchError, BenchParams, BenchState, Scheme, Signals, WhiteBox};
 
 /// How the virtual bench departs from the model, and its transmitters.

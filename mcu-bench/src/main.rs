@@ -147,12 +147,12 @@ fn narmax_plain<const N: usize, const H: usize>(
     n: u32,
 ) -> Result<(), Error> {
     let p = p.ok_or("plain pass: model shapes do not fit")?;
-    let y0 = m.scaling().1.mean;
+    let y0 = m.output_mean();
     let (mut st, mut reference) = (p.state_at(0.0, y0), m.state_at(0.0, y0));
     for u in inputs::pulses(SEED, NARMAX_MS).take(n as usize) {
         let (y, _) = c.time(|| p.simulate_step(black_box(&mut st), black_box(u)));
         let y_ref = m.simulate_step(&mut reference, u).y;
-        let follows = (y - y_ref).abs() <= 1e-3 * m.scaling().1.std; // false for NaN
+        let follows = (y - y_ref).abs() <= 1e-3 * m.output_scaling().std; // false for NaN
         if !follows {
             return Err("the plain pass does not follow model-core's f32 step");
         }

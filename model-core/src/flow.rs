@@ -264,6 +264,7 @@ fn solve_flow_general<T: Real>(g: &CubicInFlow<T>, warm_start_lps: T) -> FlowSol
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::equations::system_k;
 
     /// −s (Q − r1)(Q − r2)(Q − r3) expanded.
     fn from_roots(s: f64, r: [f64; 3]) -> CubicInFlow<f64> {
@@ -335,7 +336,7 @@ mod tests {
     #[test]
     fn paper_balance_warm_started_converges_in_few_iterations() {
         let p = crate::BenchParams::<f64>::paper();
-        let k = p.pipe_k1 + p.valve_k2 * p.valve_k2;
+        let k = crate::equations::system_k(p.pipe_k1, p.valve_k2);
         let mut q = 0.0;
         let mut worst = 0;
         for i in 0..=2000 {
@@ -358,7 +359,7 @@ mod tests {
     /// The paper's flow-balance cubic at `speed_rpm`, in `T`.
     fn paper_balance<T: Real>(speed_rpm: f64) -> CubicInFlow<T> {
         let p = crate::BenchParams::<T>::paper();
-        let k = p.pipe_k1 + p.valve_k2 * p.valve_k2;
+        let k = crate::equations::system_k(p.pipe_k1, p.valve_k2);
         balance_cubic(&p.alpha, k, p.static_head_c_mca, T::from_f64(speed_rpm))
     }
 
@@ -486,8 +487,9 @@ mod tests {
         let p32 = crate::BenchParams::<f32>::paper();
         for i in 0..=40 {
             let w = 50.0 * i as f64;
-            let g64 = balance_cubic(&p64.alpha, 0.025 + 0.1082 * 0.1082, 0.252, w);
-            let g32 = balance_cubic(&p32.alpha, 0.025 + 0.1082f32 * 0.1082, 0.252, w as f32);
+            let (k64, k32) = (system_k(0.025, 0.1082), system_k(0.025f32, 0.1082));
+            let g64 = balance_cubic(&p64.alpha, k64, 0.252, w);
+            let g32 = balance_cubic(&p32.alpha, k32, 0.252, w as f32);
             let (a, b) = (
                 solve_flow(&g64, 0.0).flow_lps,
                 solve_flow(&g32, 0.0).flow_lps,

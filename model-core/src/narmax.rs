@@ -448,11 +448,6 @@ impl<T: Real, const N: usize, const H: usize> Narmax<T, N, H> {
         self.hidden
     }
 
-    /// Scaling of u and y.
-    pub fn scaling(&self) -> (Scaling<T>, Scaling<T>) {
-        (self.u_scale, self.y_scale)
-    }
-
     /// Network output (scaled) for a regressor vector φ (scaled, `lags().inputs()` long).
     #[inline]
     pub fn network(&self, phi: &[T]) -> T {

@@ -22,6 +22,7 @@
 #![allow(clippy::needless_range_loop)]
 
 use model_core::excitation::SplitMix64;
+use model_core::narmax::Lags;
 use nalgebra::{DMatrix, DVector};
 
 /// Network and lag structure.
@@ -40,15 +41,22 @@ pub struct Structure {
 }
 
 impl Structure {
-    /// Regressors per sample.
-    pub fn inputs(&self) -> usize {
-        self.na + self.nb + self.nc
+    /// The lags, as the models take them.
+    pub fn lags(&self) -> Lags {
+        Lags {
+            na: self.na,
+            nb: self.nb,
+            nc: self.nc,
+            nk: self.nk,
+        }
     }
-    /// Samples of history needed: max(na, nb + nk − 1, nc).
+    /// Regressors per sample ([`Lags::inputs`]).
+    pub fn inputs(&self) -> usize {
+        self.lags().inputs()
+    }
+    /// Samples of history needed ([`Lags::max_lag`]).
     pub fn max_lag(&self) -> usize {
-        self.na
-            .max(self.nc)
-            .max((self.nb + self.nk).saturating_sub(1))
+        self.lags().max_lag()
     }
     /// Weights: hidden·(inputs + 1) + hidden + 1.
     pub fn params(&self) -> usize {

@@ -78,6 +78,10 @@ macro_rules! free_running {
     }};
 }
 
+/// Modbus RTU line speed of both links (SCADA and VFD), bit/s, 8N1 (QEMU's serial back-ends
+/// ignore it).
+pub const RTU_BAUD: u32 = 19_200;
+
 /// Pressure model period, ms.
 pub const PRESSURE_MS: u32 = build_period_ms(models::pressure::SAMPLE_PERIOD_S);
 /// Flow model period, ms.

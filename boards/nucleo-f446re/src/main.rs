@@ -1,7 +1,7 @@
 //! The bench controller on a NUCLEO-F446RE: the real transmitters, the VFD's analog torque
 //! reference, the two RS-485 Modbus RTU links, the watchdog, the user LED and defmt logs
 //! over RTT (`probe-rs run --chip STM32F446RETx`, this crate's cargo runner), as an RTIC 2
-//! application with the schedule of the `firmware` crate:
+//! application with the schedule of the `board-common` crate:
 //!
 //! | priority | task | here |
 //! |---|---|---|
@@ -67,7 +67,7 @@ use panic_probe as _;
 use stm32f4xx_hal::pac;
 
 /// Modbus RTU line speed, bit/s (both links).
-const BAUD_BPS: u32 = 19_200;
+const BAUD_BPS: u32 = board_common::RTU_BAUD;
 /// Core clock, Hz.
 const SYSCLK_HZ: u32 = 180_000_000;
 /// Watchdog timeout, ms. The IWDG runs from the LSI (17-47 kHz on the F446, 32 kHz nominal),

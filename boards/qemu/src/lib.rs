@@ -14,8 +14,6 @@ use stm32f4xx_hal::pac;
 pub const QEMU_SYSTICK_HZ: u32 = 168_000_000;
 /// SysTick rate, Hz: four wake-ups per control step (see the module docs).
 pub const WAKE_HZ: u32 = 4000;
-/// Line speed, baud (QEMU's serial back-ends ignore it; a board uses it).
-pub const BAUD: u32 = 19_200;
 /// Silence that ends an RTU frame under QEMU, µs: QEMU hands over one byte each time the
 /// guest reads the last one, with no line timing, and a busy host can delay a byte by a few
 /// milliseconds; 10 ms keeps frames whole and is far below any master's timeout.

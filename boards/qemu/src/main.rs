@@ -1,5 +1,5 @@
 //! The bench controller on QEMU `netduinoplus2` (STM32F405) with the virtual bench on-chip,
-//! as an RTIC 2 application with the schedule of the `firmware` crate:
+//! as an RTIC 2 application with the schedule of the `board-common` crate:
 //!
 //! | priority | task | here |
 //! |---|---|---|
@@ -38,7 +38,8 @@
 #![allow(unsafe_code)]
 #![no_main]
 
-use board_qemu::{args, exit, now_ns, now_us, BAUD, QEMU_SILENCE_US, QEMU_SYSTICK_HZ, WAKE_HZ};
+use board_common::RTU_BAUD as BAUD;
+use board_qemu::{args, exit, now_ns, now_us, QEMU_SILENCE_US, QEMU_SYSTICK_HZ, WAKE_HZ};
 use stm32f4xx_hal::pac;
 
 /// The timing margins of this run (TIM2 counts: instructions under `-icount shift=0`).
