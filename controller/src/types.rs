@@ -111,6 +111,23 @@ impl Status {
     }
 }
 
+/// The virtual bench's valve, as a factor of the nominal k2: its range.
+pub const VALVE_FACTOR_RANGE: core::ops::RangeInclusive<f32> = 0.5..=2.0;
+
+/// Faults injected into the virtual bench (a test facility: a real board ignores them).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct InjectedFaults {
+    /// The pump runs dry (no water: friction only).
+    pub dry_run: bool,
+    /// The pressure transmitter reads 2 mA (NE 43: a fault).
+    pub pressure_2ma: bool,
+    /// The flow transmitter reads 2 mA.
+    pub flow_2ma: bool,
+    /// The VFD link is cut.
+    pub vfd_link: bool,
+}
+
 /// What the controller publishes, in engineering units (the SCADA register map scales and
 /// clamps them: [`crate::scada::input_registers`]).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
