@@ -127,15 +127,19 @@ pub fn valve_factor(register: u16) -> f32 {
     f32::from(register) * 1e-3
 }
 
-/// The faults of holding register 4 (its `FAULT_*` bits).
+/// The faults of holding register 4 (its `FAULT_*` bits, the core's bits: checked by
+/// `_FAULT_BITS_ARE_THE_CORES`).
 pub fn injected_faults(register: u16) -> InjectedFaults {
-    InjectedFaults {
-        dry_run: register & FAULT_DRY_RUN != 0,
-        pressure_2ma: register & FAULT_PRESSURE_2MA != 0,
-        flow_2ma: register & FAULT_FLOW_2MA != 0,
-        vfd_link: register & FAULT_VFD_LINK != 0,
-    }
+    InjectedFaults::from_bits(register as u8)
 }
+
+const _FAULT_BITS_ARE_THE_CORES: () = assert!(
+    FAULT_DRY_RUN as u8 == InjectedFaults::DRY_RUN.bits()
+        && FAULT_PRESSURE_2MA as u8 == InjectedFaults::PRESSURE_2MA.bits()
+        && FAULT_FLOW_2MA as u8 == InjectedFaults::FLOW_2MA.bits()
+        && FAULT_VFD_LINK as u8 == InjectedFaults::VFD_LINK.bits(),
+    "holding register 4's bits must be the core's InjectedFaults bits"
+);
 
 /// The torque setpoint of holding register 0 (0.01 %), in % (register 0..=10000: 0..=100 %;
 /// the register's check refuses more).
@@ -434,7 +438,13 @@ mod tests {
         ];
         for (k, &bit) in bits.iter().enumerate() {
             let f = injected_faults(bit);
-            let flags = [f.dry_run, f.pressure_2ma, f.flow_2ma, f.vfd_link];
+            let flags = [
+                InjectedFaults::DRY_RUN,
+                InjectedFaults::PRESSURE_2MA,
+                InjectedFaults::FLOW_2MA,
+                InjectedFaults::VFD_LINK,
+            ]
+            .map(|x| f.contains(x));
             assert_eq!(flags.iter().filter(|&&x| x).count(), 1, "{bit}");
             assert!(flags[k], "{bit}");
         }

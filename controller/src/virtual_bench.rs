@@ -295,10 +295,10 @@ impl VirtualIo {
             return;
         }
         self.faults = faults;
-        self.bench.dry_run = faults.dry_run;
-        self.bench.force_pressure_ma = faults.pressure_2ma.then_some(2.0);
-        self.bench.force_flow_ma = faults.flow_2ma.then_some(2.0);
-        self.link_up = !faults.vfd_link;
+        self.bench.dry_run = faults.contains(InjectedFaults::DRY_RUN);
+        self.bench.force_pressure_ma = faults.contains(InjectedFaults::PRESSURE_2MA).then_some(2.0);
+        self.bench.force_flow_ma = faults.contains(InjectedFaults::FLOW_2MA).then_some(2.0);
+        self.link_up = !faults.contains(InjectedFaults::VFD_LINK);
     }
 }
 
