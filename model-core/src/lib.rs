@@ -64,6 +64,7 @@ pub mod narmax;
 pub mod observer;
 pub mod params;
 pub mod scalar;
+pub mod transmitter;
 pub mod units;
 pub mod whitebox;
 

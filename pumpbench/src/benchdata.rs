@@ -53,6 +53,7 @@ use model_core::equations::{
     electromagnetic_torque_pct, load_torque_pct, speed_derivative_rpm_per_s, valve_pressure_mca,
 };
 use model_core::excitation::SplitMix64;
+use model_core::transmitter::lag_to;
 use model_core::{BenchParams, BenchState, Scheme, WhiteBox, MAX_STEP_S};
 use std::io::Write;
 
@@ -403,13 +404,7 @@ impl Rich {
     fn advance(&mut self, bench: &WhiteBox<f64>, d: &Dynamics, u: f64, h: f64) {
         let target = electromagnetic_torque_pct(&bench.params().gamma, u);
         let te0 = self.te_pct;
-        let te_at = |t: f64| {
-            if d.drive_lag_s > 0.0 {
-                target + (te0 - target) * (-t / d.drive_lag_s).exp()
-            } else {
-                target
-            }
-        };
+        let te_at = |t: f64| lag_to(te0, target, t, d.drive_lag_s);
         let n = if d.water_inertia > 0.0 {
             let slope = bench.balance(self.speed_rpm).slope(self.flow_lps).abs();
             (h * slope / d.water_inertia / 0.5)

@@ -16,6 +16,7 @@ use crate::equations::{
 };
 use crate::flow::solve_flow;
 use crate::scalar::Real;
+use crate::transmitter::{decay, lag_to};
 
 /// Flow and its sensitivities at one state.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -226,26 +227,6 @@ impl<T: Real> StepConsts<T> {
             lag_q: Lag::new(cfg.flow_lag_s, substep_s),
             drive_decay: decay(substep_s, cfg.drive_lag_s),
         }
-    }
-}
-
-/// A first-order lag's decay over `h` seconds, `e^{−h/τ}` (τ = `tau` in s; 0 without a lag,
-/// `tau` ≤ 0).
-fn decay<T: Real>(h: T, tau: T) -> T {
-    if tau > T::ZERO {
-        (-h / tau).exp()
-    } else {
-        T::ZERO
-    }
-}
-
-/// `x` after `h` seconds of a first-order lag `tau` toward a held `target` (`tau` = 0: the
-/// target).
-fn lag_to<T: Real>(x: T, target: T, h: T, tau: T) -> T {
-    if tau > T::ZERO {
-        target + (x - target) * (-h / tau).exp()
-    } else {
-        target
     }
 }
 

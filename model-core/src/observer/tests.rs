@@ -3,15 +3,16 @@
 
 use super::*;
 use crate::excitation::{PulseTrain, SplitMix64, SteppedPulses};
+use crate::transmitter::{lag_exact, noise};
 use crate::{BenchParams, Scheme, WhiteBox};
 
-fn gaussian(rng: &mut SplitMix64) -> f64 {
-    let u1 = rng.next_f64().max(1e-300);
-    let u2 = rng.next_f64();
-    (-2.0 * u1.ln()).sqrt() * (2.0 * core::f64::consts::PI * u2).cos()
+/// One draw of the transmitters' noise ([`noise`], unit variance), in f64.
+fn unit_noise(rng: &mut SplitMix64) -> f64 {
+    f64::from(noise(rng))
 }
 
-/// The transmitters of the synthetic bench: lagged readings and the noise generator.
+/// The transmitters of the synthetic bench ([`crate::transmitter`]): lagged readings
+/// ([`lag_exact`]) and the noise generator.
 struct Lags {
     lag_p: f64,
     lag_q: f64,
@@ -100,8 +101,8 @@ pub(crate) fn record_with(
             bench.signals(&state)
         };
         s.speed_rpm = state.speed_rpm;
-        t.lag_p += (1.0 - (-1e-3f64 / 0.020).exp()) * (s.pressure_mca - t.lag_p);
-        t.lag_q += (1.0 - (-1e-3f64 / 0.040).exp()) * (s.flow_lps - t.lag_q);
+        lag_exact(&mut t.lag_p, s.pressure_mca, 1e-3, 0.020);
+        lag_exact(&mut t.lag_q, s.flow_lps, 1e-3, 0.040);
         if (ms + 1) % 50 == 0 {
             rows.push(Row {
                 t_s: (ms + 1) as f64 * 1e-3,
@@ -109,9 +110,9 @@ pub(crate) fn record_with(
                 speed: s.speed_rpm,
                 flow: s.flow_lps,
                 k2,
-                p_meas: t.lag_p + 0.003 * gaussian(&mut t.rng),
-                q_meas: t.lag_q + 0.02 * gaussian(&mut t.rng),
-                w_meas: s.speed_rpm + 0.5 * gaussian(&mut t.rng),
+                p_meas: t.lag_p + 0.003 * unit_noise(&mut t.rng),
+                q_meas: t.lag_q + 0.02 * unit_noise(&mut t.rng),
+                w_meas: s.speed_rpm + 0.5 * unit_noise(&mut t.rng),
             });
             acc = 0.0;
         }
