@@ -89,9 +89,10 @@ pub(crate) fn record_with(
             let p = bench.params();
             let te = crate::equations::electromagnetic_torque_pct(&p.gamma, u);
             let w = state.speed_rpm;
-            let friction = p.beta[8] * w + p.beta[9];
+            let friction = crate::equations::dry_friction_torque_pct(&p.beta, w);
             let k = bench.accel_rpm_per_s_per_pct();
-            state.speed_rpm = (w + 1e-3 * k * (te - friction)).max(0.0);
+            let rate = crate::equations::speed_derivative_rpm_per_s(te, friction, k);
+            state.speed_rpm = (w + 1e-3 * rate).max(0.0);
             let mut s = bench.signals(&state);
             s.flow_lps = 0.0;
             s.pressure_mca = -p.static_head_c_mca;
