@@ -33,7 +33,7 @@
 
 use crate::analog::{AnalogInput, LoopConfig, Status as InputStatus, FLOW_LOOP, PRESSURE_LOOP};
 use crate::protect::{Protection, ProtectionConfig};
-use crate::types::{Arithmetic, Mode, Published, Status};
+use crate::types::{Arithmetic, InjectedFaults, Mode, Published, Status};
 use crate::vfd::{VfdMap, VfdReadings};
 use model_core::excitation::McuPulses;
 use model_core::monitor::{Monitor, MonitorConfig, MonitorInputs};
@@ -275,10 +275,10 @@ pub struct Commands {
     pub setpoint_pct: f32,
     /// NARMAX arithmetic.
     pub arithmetic: Arithmetic,
-    /// Virtual bench valve, 0.1 % of nominal k2 (500..=2000).
-    pub valve_permille: u16,
-    /// Virtual bench fault injection bits (`crate::scada::FAULT_*`, 0..=15).
-    pub faults: u16,
+    /// Virtual bench valve, × nominal k2 ([`crate::types::VALVE_FACTOR_RANGE`]).
+    pub valve_factor: f32,
+    /// Faults injected into the virtual bench.
+    pub faults: InjectedFaults,
     /// Writes of mode 0 (stop) so far (wraps): a change acknowledges the latched alarms
     /// and a trip.
     pub stop_writes: u16,
@@ -328,14 +328,14 @@ pub struct Inputs {
     pub vfd: VfdStatus,
 }
 
-/// A virtual bench's settings from SCADA (holding registers 3 and 4).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// A virtual bench's settings (from SCADA's holding registers 3 and 4).
+#[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct BenchCommands {
-    /// Valve, 0.1 % of nominal k2 (500..=2000).
-    pub valve_permille: u16,
-    /// Injected faults (`crate::scada::FAULT_*`).
-    pub faults: u16,
+    /// Valve, × nominal k2 ([`crate::types::VALVE_FACTOR_RANGE`]).
+    pub valve_factor: f32,
+    /// Injected faults.
+    pub faults: InjectedFaults,
 }
 
 /// The outputs of one [`Controller::step`].
@@ -697,7 +697,7 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             torque_ref_pct: u,
             requested_torque_pct: requested,
             bench: self.virtual_bench.then_some(BenchCommands {
-                valve_permille: inp.commands.valve_permille,
+                valve_factor: inp.commands.valve_factor,
                 faults: inp.commands.faults,
             }),
             published: self.out,

@@ -60,7 +60,7 @@
 use crate::control::Commands;
 use crate::modbus::{serve, signed_register, unsigned_register, Exception, Frame, RegisterMap};
 use crate::protect::{ProtectionConfig, NO_FLOW_TRIP_RANGE_S, OVERSPEED_RANGE_RPM, TRIP_ALL};
-use crate::types::{Arithmetic, Mode, Published};
+use crate::types::{Arithmetic, InjectedFaults, Mode, Published, VALVE_FACTOR_RANGE};
 
 /// Input registers.
 pub const INPUT_REGISTERS: usize = 26;
@@ -70,8 +70,10 @@ pub const HOLDING_REGISTERS: usize = 8;
 pub const BENCH_HOLDING_REGISTERS: core::ops::Range<usize> = 3..5;
 /// Virtual bench valve, 0.1 % of nominal k2: nominal.
 pub const VALVE_NOMINAL_PERMILLE: u16 = 1000;
-/// Virtual bench valve: the range, 0.1 % of nominal k2.
-pub const VALVE_RANGE_PERMILLE: core::ops::RangeInclusive<u16> = 500..=2000;
+/// Virtual bench valve: the range, 0.1 % of nominal k2 (the core's
+/// [`crate::types::VALVE_FACTOR_RANGE`] in the register's unit).
+pub const VALVE_RANGE_PERMILLE: core::ops::RangeInclusive<u16> =
+    (*VALVE_FACTOR_RANGE.start() * 1000.0) as u16..=(*VALVE_FACTOR_RANGE.end() * 1000.0) as u16;
 /// Fault injection bit: the virtual pump runs dry.
 pub const FAULT_DRY_RUN: u16 = 1 << 0;
 /// Fault injection bit: the pressure transmitter at 2 mA.
@@ -118,6 +120,26 @@ pub fn arithmetic_from_register(v: u16) -> Option<Arithmetic> {
         _ => None,
     }
 }
+
+/// The virtual bench's valve of holding register 3 (0.1 % of nominal k2, 500..=2000), as a
+/// factor of the nominal k2 (0.5..=2).
+pub fn valve_factor(register: u16) -> f32 {
+    f32::from(register) * 1e-3
+}
+
+/// The faults of holding register 4 (its `FAULT_*` bits, the core's bits: checked by
+/// `_FAULT_BITS_ARE_THE_CORES`).
+pub fn injected_faults(register: u16) -> InjectedFaults {
+    InjectedFaults::from_bits(register)
+}
+
+const _FAULT_BITS_ARE_THE_CORES: () = assert!(
+    FAULT_DRY_RUN == InjectedFaults::DRY_RUN.bits()
+        && FAULT_PRESSURE_2MA == InjectedFaults::PRESSURE_2MA.bits()
+        && FAULT_FLOW_2MA == InjectedFaults::FLOW_2MA.bits()
+        && FAULT_VFD_LINK == InjectedFaults::VFD_LINK.bits(),
+    "holding register 4's bits must be the core's InjectedFaults bits"
+);
 
 /// The torque setpoint of holding register 0 (0.01 %), in % (register 0..=10000: 0..=100 %;
 /// the register's check refuses more).
@@ -295,8 +317,8 @@ impl ScadaSlave {
             mode: self.mode,
             setpoint_pct: setpoint_pct(self.setpoint),
             arithmetic: self.arithmetic,
-            valve_permille: self.valve_permille,
-            faults: self.faults,
+            valve_factor: valve_factor(self.valve_permille),
+            faults: injected_faults(self.faults),
             stop_writes: self.stop_writes,
             protection: self.protection,
         }
@@ -401,6 +423,33 @@ fn read_words(table: &[u16], address: u16, out: &mut [u16]) -> Result<(), Except
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Holding registers 3 and 4 in the core's units: the valve as a factor, each fault bit
+    /// its own flag; the register range is the core's factor range.
+    #[test]
+    fn bench_registers_in_core_units() {
+        assert_eq!([500u16, 1000, 2000].map(valve_factor), [0.5f32, 1.0, 2.0]);
+        assert_eq!(VALVE_RANGE_PERMILLE, 500..=2000);
+        let bits = [
+            FAULT_DRY_RUN,
+            FAULT_PRESSURE_2MA,
+            FAULT_FLOW_2MA,
+            FAULT_VFD_LINK,
+        ];
+        for (k, &bit) in bits.iter().enumerate() {
+            let f = injected_faults(bit);
+            let flags = [
+                InjectedFaults::DRY_RUN,
+                InjectedFaults::PRESSURE_2MA,
+                InjectedFaults::FLOW_2MA,
+                InjectedFaults::VFD_LINK,
+            ]
+            .map(|x| f.contains(x));
+            assert_eq!(flags.iter().filter(|&&x| x).count(), 1, "{bit}");
+            assert!(flags[k], "{bit}");
+        }
+        assert_eq!(injected_faults(0), InjectedFaults::default());
+    }
     use crate::modbus::crc16;
     use crate::types::Status;
 

@@ -111,6 +111,43 @@ impl Status {
     }
 }
 
+/// The virtual bench's valve, as a factor of the nominal k2: its range.
+pub const VALVE_FACTOR_RANGE: core::ops::RangeInclusive<f32> = 0.5..=2.0;
+
+/// Faults injected into the virtual bench (a test facility: a real board ignores them), one
+/// bit each (a word, not four flags: the control task copies its commands every step).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct InjectedFaults(u16);
+
+impl InjectedFaults {
+    /// The pump runs dry (no water: friction only).
+    pub const DRY_RUN: Self = Self(1 << 0);
+    /// The pressure transmitter reads 2 mA (NE 43: a fault).
+    pub const PRESSURE_2MA: Self = Self(1 << 1);
+    /// The flow transmitter reads 2 mA.
+    pub const FLOW_2MA: Self = Self(1 << 2);
+    /// The VFD link is cut.
+    pub const VFD_LINK: Self = Self(1 << 3);
+    /// All four.
+    pub const ALL: Self = Self(0b1111);
+
+    /// The faults of a bit word (bits other than the four are dropped).
+    pub const fn from_bits(bits: u16) -> Self {
+        Self(bits & Self::ALL.0)
+    }
+
+    /// The bit word.
+    pub const fn bits(self) -> u16 {
+        self.0
+    }
+
+    /// Whether every fault of `other` is injected.
+    pub const fn contains(self, other: Self) -> bool {
+        self.0 & other.0 == other.0
+    }
+}
+
 /// What the controller publishes, in engineering units (the SCADA register map scales and
 /// clamps them: [`crate::scada::input_registers`]).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]

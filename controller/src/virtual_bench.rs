@@ -25,6 +25,7 @@ use crate::control::{
 };
 use crate::link::{ScadaLink, VfdLink, VfdPort};
 use crate::modbus::Frame;
+use crate::types::InjectedFaults;
 use crate::vfd::VfdMap;
 use crate::vfdsim::{DriveValues, VfdSim};
 use model_core::equations::valve_pressure_mca;
@@ -240,8 +241,8 @@ pub struct VirtualIo {
     /// `false` cuts the VFD link (the drive gets nothing, answers nothing).
     pub link_up: bool,
     torque_pct: f32,
-    valve_permille: u16,
-    faults: u16,
+    valve_factor: f32,
+    faults: InjectedFaults,
     answer: Frame,
 }
 
@@ -253,8 +254,8 @@ impl VirtualIo {
             drive: VfdSim::new(map)?,
             link_up: true,
             torque_pct: 0.0,
-            valve_permille: crate::scada::VALVE_NOMINAL_PERMILLE,
-            faults: 0,
+            valve_factor: 1.0,
+            faults: InjectedFaults::default(),
             answer: Frame::new(),
         })
     }
@@ -280,25 +281,24 @@ impl VirtualIo {
 }
 
 impl VirtualIo {
-    /// Applies the SCADA's virtual-bench registers when they change: the valve in 0.1 % of
-    /// nominal (clamped to 500..=2000) and the fault bits (`crate::scada::FAULT_*`). Unchanged
-    /// registers leave the bench alone (tests set its faults directly).
-    pub fn apply(&mut self, valve_permille: u16, faults: u16) {
-        use crate::scada::{FAULT_DRY_RUN, FAULT_FLOW_2MA, FAULT_PRESSURE_2MA, FAULT_VFD_LINK};
-        let permille = valve_permille.clamp(500, 2000);
-        if permille != self.valve_permille {
-            self.valve_permille = permille;
-            // Within 0.5..2 × a valid k2: cannot fail.
-            let _ = self.bench.set_valve_factor(f32::from(permille) * 1e-3);
+    /// Applies the virtual bench's commands when they change: the valve as a factor of the
+    /// nominal k2 (the commands' range, [`crate::types::VALVE_FACTOR_RANGE`], is the SCADA
+    /// map's check; a factor the bench refuses, NaN or ≤ 0, leaves the valve as it is) and the
+    /// injected faults. Unchanged commands leave the bench alone (tests set its faults
+    /// directly).
+    pub fn apply(&mut self, valve_factor: f32, faults: InjectedFaults) {
+        // The SCADA map checks the range; an invalid factor (NaN, ≤ 0) leaves the valve.
+        if valve_factor != self.valve_factor && self.bench.set_valve_factor(valve_factor).is_ok() {
+            self.valve_factor = valve_factor;
         }
         if faults == self.faults {
             return;
         }
         self.faults = faults;
-        self.bench.dry_run = faults & FAULT_DRY_RUN != 0;
-        self.bench.force_pressure_ma = (faults & FAULT_PRESSURE_2MA != 0).then_some(2.0);
-        self.bench.force_flow_ma = (faults & FAULT_FLOW_2MA != 0).then_some(2.0);
-        self.link_up = faults & FAULT_VFD_LINK == 0;
+        self.bench.dry_run = faults.contains(InjectedFaults::DRY_RUN);
+        self.bench.force_pressure_ma = faults.contains(InjectedFaults::PRESSURE_2MA).then_some(2.0);
+        self.bench.force_flow_ma = faults.contains(InjectedFaults::FLOW_2MA).then_some(2.0);
+        self.link_up = !faults.contains(InjectedFaults::VFD_LINK);
     }
 }
 
@@ -391,7 +391,7 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
         let out = controller.step(inputs);
         io.set_torque_ref(out.torque_ref_pct);
         if let Some(b) = out.bench {
-            io.apply(b.valve_permille, b.faults);
+            io.apply(b.valve_factor, b.faults);
         }
         io.step_1ms()?;
         Ok(out)

@@ -359,7 +359,7 @@ fn tick(c: &mut Cost, n: u32) -> Result<(), Error> {
         let out = c.time(|| b.controller.step(black_box(&inputs)));
         b.io.set_torque_ref(out.torque_ref_pct);
         if let Some(x) = out.bench {
-            b.io.apply(x.valve_permille, x.faults);
+            b.io.apply(x.valve_factor, x.faults);
         }
         b.io.step_1ms().map_err(|_| "virtual bench step failed")?;
         b.scada.publish(&out.published);
