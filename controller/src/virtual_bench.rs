@@ -174,15 +174,7 @@ impl VirtualBench {
         };
         self.delivered_pct = u;
         if self.dry_run {
-            // Friction only, no water: Euler at 1 ms is ample for this first-order run-up.
-            let p = self.bench.params();
-            let te = model_core::equations::electromagnetic_torque_pct(&p.gamma, u);
-            let w = self.state.speed_rpm;
-            let friction = model_core::equations::dry_friction_torque_pct(&p.beta, w);
-            let accel = self.bench.accel_rpm_per_s_per_pct();
-            let rate = model_core::equations::speed_derivative_rpm_per_s(te, friction, accel);
-            self.state.speed_rpm = (w + 1e-3 * rate).clamp(0.0, 6000.0);
-            self.state.flow_lps = 0.0;
+            self.bench.dry_run_step(&mut self.state, u, 1e-3);
         } else {
             self.bench.step(&mut self.state, u, 1e-3, Scheme::Rk4)?;
         }

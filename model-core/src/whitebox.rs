@@ -1,9 +1,9 @@
 //! The white-box bench: one ODE in speed with the flow loop solved at every evaluation.
 
 use crate::equations::{
-    electromagnetic_torque_pct, flow_balance_poly, flow_balance_poly_expr, load_torque_pct,
-    pipe_loss_mca, pump_head_mca, speed_derivative_rpm_per_s, system_k, system_k_expr,
-    valve_pressure_mca, CubicInFlow,
+    dry_friction_torque_pct, electromagnetic_torque_pct, flow_balance_poly, flow_balance_poly_expr,
+    load_torque_pct, pipe_loss_mca, pump_head_mca, speed_derivative_rpm_per_s, system_k,
+    system_k_expr, valve_pressure_mca, CubicInFlow,
 };
 use crate::error::BenchError;
 use crate::flow::solve_flow;
@@ -248,6 +248,22 @@ impl<T: Real> WhiteBox<T> {
     /// ([`BenchParams::accel_rpm_per_s_per_pct`]).
     pub fn accel_rpm_per_s_per_pct(&self) -> T {
         self.accel
+    }
+
+    /// One forward-Euler step of `dt_s` seconds of the pump running dry (no water: eq. (3) with
+    /// the friction alone, [`crate::equations::dry_friction_torque_pct`]) under the torque
+    /// reference `torque_ref_pct` (%, as delivered): the speed kept within
+    /// 0..=[`STEADY_SEARCH_MAX_RPM`], the flow 0. Euler at 1 ms is ample for this first-order
+    /// run-up (the virtual bench's dry run and the observer's dry-run test records).
+    pub fn dry_run_step(&self, state: &mut BenchState<T>, torque_ref_pct: T, dt_s: T) {
+        let te = electromagnetic_torque_pct(&self.params.gamma, torque_ref_pct);
+        let w = state.speed_rpm;
+        let friction = dry_friction_torque_pct(&self.params.beta, w);
+        let rate = speed_derivative_rpm_per_s(te, friction, self.accel);
+        state.speed_rpm = (w + dt_s * rate)
+            .max(T::ZERO)
+            .min(T::from_f64(STEADY_SEARCH_MAX_RPM));
+        state.flow_lps = T::ZERO;
     }
 
     /// The parameters in use.

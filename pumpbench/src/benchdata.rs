@@ -401,6 +401,9 @@ impl Rich {
     /// (its target Te(u) is constant over the step), speed and flow by RK4 in equal sub-steps,
     /// as many as keep a sub-step under half the flow's time constant `L / |∂g/∂Q|`. Without
     /// inertia the flow is the flow balance's root at each stage (as in the white-box bench).
+    /// Its own RK4, not `WhiteBox::step`: the state here is speed *and* flow (the water
+    /// column) with a drive torque that moves within the step, which the white-box's one-state
+    /// step with the torque held does not integrate; it calls the same equations.
     fn advance(&mut self, bench: &WhiteBox<f64>, d: &Dynamics, u: f64, h: f64) {
         let target = electromagnetic_torque_pct(&bench.params().gamma, u);
         let te0 = self.te_pct;

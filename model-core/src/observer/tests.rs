@@ -86,13 +86,8 @@ pub(crate) fn record_with(
         }
         acc += u;
         let mut s = if dry_from_s.is_some_and(|t| now >= t) {
+            bench.dry_run_step(&mut state, u, 1e-3);
             let p = bench.params();
-            let te = crate::equations::electromagnetic_torque_pct(&p.gamma, u);
-            let w = state.speed_rpm;
-            let friction = crate::equations::dry_friction_torque_pct(&p.beta, w);
-            let k = bench.accel_rpm_per_s_per_pct();
-            let rate = crate::equations::speed_derivative_rpm_per_s(te, friction, k);
-            state.speed_rpm = (w + 1e-3 * rate).max(0.0);
             let mut s = bench.signals(&state);
             s.flow_lps = 0.0;
             s.pressure_mca = -p.static_head_c_mca;
