@@ -43,8 +43,14 @@ pub struct Lags {
 
 impl Lags {
     /// Number of regressors, na + nb + nc.
-    pub fn inputs(&self) -> usize {
+    pub const fn inputs(&self) -> usize {
         self.na + self.nb + self.nc
+    }
+
+    /// The NNSYSID weight counts of a network with these lags and `hidden` tanh units:
+    /// `(W1, W2) = (hidden·(inputs + 1), hidden + 1)` (each row and the output with its bias).
+    pub const fn weight_counts(&self, hidden: usize) -> (usize, usize) {
+        (hidden * (self.inputs() + 1), hidden + 1)
     }
 
     /// Samples of history a prediction needs: max(na, nk + nb − 1, nc).
@@ -402,7 +408,7 @@ impl<T: Real, const N: usize, const H: usize> Narmax<T, N, H> {
         if n > N || hidden > H || lags.na > N || lags.nb > N || lags.nc > N {
             return Err(NarmaxError::TooLarge);
         }
-        if shape != (hidden * (n + 1), hidden + 1) {
+        if shape != lags.weight_counts(hidden) {
             return Err(NarmaxError::WrongShape);
         }
         let finite = (0..shape.0)

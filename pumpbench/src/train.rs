@@ -58,9 +58,10 @@ impl Structure {
     pub fn max_lag(&self) -> usize {
         self.lags().max_lag()
     }
-    /// Weights: hidden·(inputs + 1) + hidden + 1.
+    /// Weights: hidden·(inputs + 1) + hidden + 1 ([`Lags::weight_counts`]).
     pub fn params(&self) -> usize {
-        self.hidden * (self.inputs() + 1) + self.hidden + 1
+        let (w1, w2) = self.lags().weight_counts(self.hidden);
+        w1 + w2
     }
 }
 
@@ -82,7 +83,7 @@ impl Weights {
         )
     }
     fn from_theta(s: &Structure, theta: &DVector<f64>) -> Self {
-        let n2 = s.hidden + 1;
+        let n2 = s.lags().weight_counts(s.hidden).1;
         Weights {
             w2: theta.as_slice()[..n2].to_vec(),
             w1: theta.as_slice()[n2..].to_vec(),
@@ -91,10 +92,12 @@ impl Weights {
     /// Uniform in [−0.5, 0.5) (NNSYSID's `rand − 0.5`).
     pub fn random(s: &Structure, rng: &mut SplitMix64) -> Self {
         Weights {
-            w1: (0..s.hidden * (s.inputs() + 1))
+            w1: (0..s.lags().weight_counts(s.hidden).0)
                 .map(|_| rng.next_f64() - 0.5)
                 .collect(),
-            w2: (0..=s.hidden).map(|_| rng.next_f64() - 0.5).collect(),
+            w2: (0..s.lags().weight_counts(s.hidden).1)
+                .map(|_| rng.next_f64() - 0.5)
+                .collect(),
         }
     }
 }
@@ -422,7 +425,7 @@ pub fn identify(
     let narx = Structure { nc: 0, ..*s };
     let start = select_and_train(&narx, d, seed, starts, 100, |_| {});
     let nab = s.na + s.nb;
-    let mut w1 = Vec::with_capacity(s.hidden * (s.inputs() + 1));
+    let mut w1 = Vec::with_capacity(s.lags().weight_counts(s.hidden).0);
     for j in 0..s.hidden {
         let r = &start.weights.w1[j * (nab + 1)..(j + 1) * (nab + 1)];
         w1.extend_from_slice(&r[..nab]);

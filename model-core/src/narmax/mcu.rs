@@ -225,8 +225,8 @@ impl NnsysidModel<'_> {
         if self.frames() > frames || self.hidden > hidden || frames > MAX_FRAMES {
             return Err(NarmaxError::TooLarge);
         }
-        let n = l.na + l.nb;
-        if self.w1.len() != self.hidden * (n + 1) || self.w2.len() != self.hidden + 1 {
+        let (w1n, w2n) = l.weight_counts(self.hidden);
+        if self.w1.len() != w1n || self.w2.len() != w2n {
             return Err(NarmaxError::WrongShape);
         }
         let s = [
