@@ -381,25 +381,40 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
         inputs: &Inputs,
     ) -> Result<Outputs, BenchError> {
         let out = controller.step(inputs);
+        Self::after_step(io, &out)?;
+        Ok(out)
+    }
+
+    /// The step's outputs to the bench (torque, valve, faults), then the bench stepped 1 ms.
+    fn after_step(io: &mut VirtualIo, out: &Outputs) -> Result<(), BenchError> {
         io.set_torque_ref(out.torque_ref_pct);
         if let Some(b) = out.bench {
             io.apply(b.valve_factor, b.faults);
         }
-        io.step_1ms()?;
-        Ok(out)
+        io.step_1ms()
     }
 
     /// One millisecond: the control task's part ([`Self::control`]), then SCADA takes the
     /// published values and the VFD link its pass at the step's time with the requested
     /// torque, as the firmware's lower-priority tasks do after each control step.
     pub fn tick(&mut self) -> Result<Outputs, BenchError> {
+        self.tick_with(|controller, inputs| controller.step(inputs))
+    }
+
+    /// [`Self::tick`] with the core's step made by `step` (the MCU bench times it there):
+    /// the inputs gathered, `step`, then everything that follows a step, as the firmware does.
+    pub fn tick_with(
+        &mut self,
+        step: impl FnOnce(&mut Controller<NP, HP, NF, HF>, &Inputs) -> Outputs,
+    ) -> Result<Outputs, BenchError> {
         let inputs = Self::inputs(
             &self.controller,
             &mut self.io,
             self.scada.commands(),
             self.vfd.status(),
         );
-        let out = Self::control(&mut self.controller, &mut self.io, &inputs)?;
+        let out = step(&mut self.controller, &inputs);
+        Self::after_step(&mut self.io, &out)?;
         self.scada.publish(&out.published);
         self.vfd
             .poll(out.t_ms, out.requested_torque_pct, &mut self.io);

@@ -354,16 +354,8 @@ fn tick(c: &mut Cost, n: u32) -> Result<(), Error> {
     let mut b = VirtualBoard::new(&config, p, q, VirtualBenchConfig::default_offsets(SEED))
         .map_err(|_| "controller refused its configuration")?;
     for _ in 0..n {
-        let inputs =
-            VirtualBoard::inputs(&b.controller, &mut b.io, b.scada.commands(), b.vfd.status());
-        let out = c.time(|| b.controller.step(black_box(&inputs)));
-        b.io.set_torque_ref(out.torque_ref_pct);
-        if let Some(x) = out.bench {
-            b.io.apply(x.valve_factor, x.faults);
-        }
-        b.io.step_1ms().map_err(|_| "virtual bench step failed")?;
-        b.scada.publish(&out.published);
-        b.vfd.poll(out.t_ms, out.requested_torque_pct, &mut b.io);
+        b.tick_with(|controller, inputs| c.time(|| controller.step(black_box(inputs))))
+            .map_err(|_| "virtual bench step failed")?;
     }
     Ok(())
 }
