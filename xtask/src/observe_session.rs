@@ -3,6 +3,10 @@
 
 use crate::mbpoll::{mbpoll, registers};
 use crate::util::Result;
+use controller::scada;
+use controller::virtual_bench::VirtualBenchConfig;
+use model_core::monitor;
+use model_core::BenchParams;
 use std::time::Duration;
 
 /// What a user does with the observer over Modbus (mbpoll), running at 50 %: read the
@@ -22,8 +26,11 @@ pub fn observer_session(pty: &str, report: &mut String) -> Result {
             Err(format!("write holding {register} = {value}: {t}"))
         }
     };
-    // The virtual bench's valve is the paper's k2 × 1.02 (a few percent off the model).
-    let bench_k2 = 0.1082 * 1.02;
+    // The virtual bench's valve: the paper's k2 × its configured factor (a few percent off
+    // the model the observer starts from).
+    let bench_k2 = f64::from(
+        BenchParams::<f32>::PAPER.valve_k2 * VirtualBenchConfig::default_offsets(1).valve_factor,
+    );
     let o = observer()?;
     let k2 = o[2] as f64 * 1e-5;
     report.push_str(&format!(
@@ -45,14 +52,19 @@ pub fn observer_session(pty: &str, report: &mut String) -> Result {
         bench_k2 * 1.3,
         o[3]
     ));
-    if (k2 / (bench_k2 * 1.3) - 1.0).abs() > 0.03 || o[3] != 1 << 6 {
+    if (k2 / (bench_k2 * 1.3) - 1.0).abs() > 0.03 || o[3] != i64::from(monitor::LOAD_CHANGED) {
         return Err(format!("after closing the valve: {o:?}\n{report}"));
     }
     holding("4", "1000")?;
     for (faults, bit, what) in [
-        ("2", 0, "pressure transmitter at 2 mA"),
-        ("8", 2, "VFD link cut"),
+        (
+            scada::FAULT_PRESSURE_2MA,
+            monitor::PRESSURE_TRANSMITTER,
+            "pressure transmitter at 2 mA",
+        ),
+        (scada::FAULT_VFD_LINK, monitor::VFD_LINK, "VFD link cut"),
     ] {
+        let faults = &faults.to_string();
         holding("5", faults)?;
         std::thread::sleep(Duration::from_secs(2));
         let o = observer()?;
@@ -60,9 +72,9 @@ pub fn observer_session(pty: &str, report: &mut String) -> Result {
             "{what} (holding 4 = {faults}): alarms {:#04x}\n",
             o[3]
         ));
-        if o[3] & (1 << bit) == 0 {
+        if o[3] & i64::from(bit) == 0 {
             return Err(format!(
-                "{what}: alarm bit {bit} not raised: {o:?}\n{report}"
+                "{what}: alarm {bit:#x} not raised: {o:?}\n{report}"
             ));
         }
         holding("5", "0")?;

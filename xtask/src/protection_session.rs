@@ -3,6 +3,8 @@
 
 use crate::mbpoll::{mbpoll, registers};
 use crate::util::Result;
+use controller::types::Status;
+use model_core::monitor;
 use std::time::{Duration, Instant};
 
 /// The protections as a user tries them over Modbus (mbpoll), running at 50 %: a dry
@@ -39,10 +41,12 @@ pub fn protection_session(pty: &str, report: &mut String) -> Result {
             }
         }
     };
-    const TRIPPED: i64 = 1 << 7;
-    const DRY_RUN: i64 = 1 << 3;
+    // The status word's trip flag (input 0) and the alarms (input 21, the trip causes input
+    // 23), as the core and the monitor define them.
+    let tripped = |status: i64| Status::from_bits(status as u16).tripped;
+    const DRY_RUN: i64 = monitor::DRY_RUN as i64;
     let r = inputs()?;
-    if r[1] != 5000 || r[0] & TRIPPED != 0 {
+    if r[1] != 5000 || tripped(r[0]) {
         return Err(format!(
             "running at 50 % expected before the dry run: {r:?}"
         ));
@@ -65,7 +69,7 @@ pub fn protection_session(pty: &str, report: &mut String) -> Result {
         "dry run injected (holding 4 = 1): torque 0 % seen after {zero_s:.2?} s, alarm up after {alarm_s:.2} s with torque {} (0.01 %), status {:#06x}, trip causes {:#06x}\n",
         r[1], r[0], r[23]
     ));
-    if r[1] != 0 || r[0] & TRIPPED == 0 || alarm_s > 7.0 {
+    if r[1] != 0 || !tripped(r[0]) || alarm_s > 7.0 {
         return Err(format!(
             "dry run: torque not 0 % with the alarm up\n{report}"
         ));
@@ -86,7 +90,7 @@ pub fn protection_session(pty: &str, report: &mut String) -> Result {
     holding(4, 0)?;
     std::thread::sleep(Duration::from_secs(3));
     holding(1, 0)?;
-    let (clear_s, _) = until(Duration::from_secs(10), &|r| r[0] & TRIPPED == 0)
+    let (clear_s, _) = until(Duration::from_secs(10), &|r| !tripped(r[0]))
         .map_err(|e| format!("trip not cleared: {e}"))?;
     holding(1, 1)?;
     let (run_s, _) = until(Duration::from_secs(3), &|r| r[1] == 5000)
@@ -103,16 +107,14 @@ pub fn protection_session(pty: &str, report: &mut String) -> Result {
         "overspeed limit 1000 rpm at 50 %: torque 0 % within {trip_s:.2} s (trip causes {:#06x})\n",
         r[23]
     ));
-    if trip_s > 0.5 || r[23] != 1 << 8 {
+    if trip_s > 0.5 || r[23] != i64::from(monitor::OVERSPEED) {
         return Err(format!("overspeed trip: {r:?}\n{report}"));
     }
     holding(5, 1925)?;
     std::thread::sleep(Duration::from_secs(3));
     holding(1, 0)?;
-    until(Duration::from_secs(5), &|r| {
-        r[0] & TRIPPED == 0 && r[21] == 0
-    })
-    .map_err(|e| format!("overspeed not acknowledged: {e}"))?;
+    until(Duration::from_secs(5), &|r| !tripped(r[0]) && r[21] == 0)
+        .map_err(|e| format!("overspeed not acknowledged: {e}"))?;
     // Defect 1: a transmitter fault injected at rest clears within 3 s of its removal.
     std::thread::sleep(Duration::from_secs(2));
     holding(4, 2)?;
