@@ -374,7 +374,8 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
     }
 
     /// The control task's part of a millisecond: [`Controller::step`], its outputs to the
-    /// bench (torque, valve, faults), the bench stepped 1 ms, the values published to SCADA.
+    /// bench (torque, valve, faults), the bench stepped 1 ms (publishing to SCADA and the VFD
+    /// pass are the lower-priority tasks' part, [`Self::tick_with`]).
     pub fn control(
         controller: &mut Controller<NP, HP, NF, HF>,
         io: &mut VirtualIo,
@@ -394,9 +395,10 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
         io.step_1ms()
     }
 
-    /// One millisecond: the control task's part ([`Self::control`]), then SCADA takes the
-    /// published values and the VFD link its pass at the step's time with the requested
-    /// torque, as the firmware's lower-priority tasks do after each control step.
+    /// One millisecond: the control task's part (the core's step and what [`Self::control`]
+    /// does after it), then SCADA takes the published values and the VFD link its pass at the
+    /// step's time with the requested torque, as the firmware's lower-priority tasks do after
+    /// each control step.
     pub fn tick(&mut self) -> Result<Outputs, BenchError> {
         self.tick_with(|controller, inputs| controller.step(inputs))
     }

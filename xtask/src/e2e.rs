@@ -7,6 +7,8 @@ use crate::mbpoll::{mbpoll, registers};
 use crate::qemu::{qemu_command, start_pty};
 use crate::util::Result;
 use crate::{line, observe_session, protection_session};
+use controller::scada::{published_from_registers, INPUT_REGISTERS};
+use controller::types::{Published, Status};
 use std::io::Write;
 use std::path::Path;
 use std::time::Duration;
@@ -20,16 +22,21 @@ pub fn run(elf: &Path) -> Result<String> {
     let pty = bridge.path.clone();
     let mut report = format!("SCADA on {pty}\n");
 
-    // Read all input registers (FC 04).
-    let read = |report: &mut String| -> Result<Vec<i64>> {
-        let t = mbpoll(&pty, &["-a", "1", "-t", "3", "-r", "1", "-c", "18"], &[])?;
-        let r = registers(&t, 1, 18)?;
+    // Read all input registers (FC 04), decoded by the register map itself.
+    let read = |report: &mut String| -> Result<Published> {
+        let count = INPUT_REGISTERS.to_string();
+        let t = mbpoll(&pty, &["-a", "1", "-t", "3", "-r", "1", "-c", &count], &[])?;
+        let r = registers(&t, 1, INPUT_REGISTERS)?;
         report.push_str(&format!("inputs: {r:?}\n"));
-        Ok(r)
+        let mut words = [0u16; INPUT_REGISTERS];
+        for (w, v) in words.iter_mut().zip(&r) {
+            *w = *v as u16; // mbpoll prints the words unsigned
+        }
+        Ok(published_from_registers(&words))
     };
-    let r0 = read(&mut report)?;
-    if r0[1] != 0 || r0[0] & 1 != 0 {
-        return Err(format!("stopped at start expected, read {r0:?}"));
+    let p0 = read(&mut report)?;
+    if p0.torque_pct != 0.0 || Status::from_bits(p0.status).running {
+        return Err(format!("stopped at start expected, read {p0:?}"));
     }
     // Setpoint 50 % and manual mode (FC 16 of two holding registers).
     let w = mbpoll(&pty, &["-a", "1", "-t", "4", "-r", "1"], &["5000", "1"])?;
@@ -37,22 +44,24 @@ pub fn run(elf: &Path) -> Result<String> {
         return Err(format!("write setpoint and mode: {w}"));
     }
     std::thread::sleep(Duration::from_secs(3));
-    let r = read(&mut report)?;
+    let p = read(&mut report)?;
     let bench = model_core::WhiteBox::<f32>::paper();
     let op = bench.signals(&bench.steady_state(50.0).map_err(|e| e.to_string())?);
-    let speed = r[6] as f64 / 10.0;
-    let pressure = (r[2] as i16) as f64 / 1000.0;
-    let flow = r[3] as f64 / 100.0;
+    let speed = f64::from(p.whitebox_speed_rpm);
+    let pressure = f64::from(p.pressure_mca);
+    let flow = f64::from(p.flow_lps);
     let rel = |a: f64, b: f32| (a / b as f64 - 1.0).abs();
     report.push_str(&format!(
         "after 3 s at 50 %: white-box speed {speed} rpm (model {:.1}), measured pressure {pressure} mca (model {:.3}), flow {flow} l/s (model {:.2})\n",
         op.speed_rpm, op.pressure_mca, op.flow_lps
     ));
-    if r[1] != 5000
+    // Running, no alarm, the VFD link up (the extrapolation flag may be either).
+    let s = Status::from_bits(p.status);
+    if p.torque_pct != 50.0
         || rel(speed, op.speed_rpm) > 0.01
         || rel(pressure, op.pressure_mca) > 0.05
         || rel(flow, op.flow_lps) > 0.05
-        || r[0] & 0b1011 != 0b1001
+        || !(s.running && !s.any_alarm && s.vfd_link_ok)
     {
         return Err(format!("operating point at 50 % not reached:\n{report}"));
     }
@@ -85,7 +94,7 @@ pub fn run(elf: &Path) -> Result<String> {
         return Err(format!("a request for unit 2 must get silence, got:\n{t}"));
     }
     let r2 = read(&mut report)?;
-    if r2[1] != 5000 {
+    if r2.torque_pct != 50.0 {
         return Err(format!(
             "the slave must still answer after malformed frames: {r2:?}"
         ));
