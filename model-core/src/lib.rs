@@ -59,6 +59,7 @@ pub mod equations;
 pub mod error;
 pub mod excitation;
 pub mod flow;
+pub mod inverse;
 pub mod monitor;
 pub mod narmax;
 pub mod observer;
