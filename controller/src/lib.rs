@@ -22,6 +22,7 @@ pub mod control;
 pub mod link;
 pub mod modbus;
 pub mod protect;
+pub mod regulate;
 pub mod rtu;
 pub mod scada;
 pub mod types;
