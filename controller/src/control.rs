@@ -33,9 +33,11 @@
 
 use crate::analog::{AnalogInput, LoopConfig, Status as InputStatus, FLOW_LOOP, PRESSURE_LOOP};
 use crate::protect::{Protection, ProtectionConfig};
-use crate::types::{Arithmetic, InjectedFaults, Mode, Published, Status};
+use crate::regulate::{Controlled, Regulator, CONTROL_PERIOD_MS, CONTROL_PHASE_MS};
+use crate::types::{Arithmetic, ControlSettings, InjectedFaults, Mode, Published, Status};
 use crate::vfd::{VfdMap, VfdReadings};
 use model_core::excitation::McuPulses;
+use model_core::inverse::Load;
 use model_core::monitor::{Monitor, MonitorConfig, MonitorInputs};
 use model_core::narmax::mcu::{NarxF32, NarxF32State, NarxQ15, NarxQ15State, MAX_PERIOD_MS};
 use model_core::narmax::{NarmaxError, NarmaxOutput, Predictor};
@@ -49,6 +51,11 @@ pub const LOG_EVERY_MS: u32 = 1000;
 /// The protections use the drive's speed reading up to this age, ms; older (reads failing),
 /// the observer's speed.
 pub const DRIVE_READING_FRESH_MS: u32 = 100;
+
+/// The observer's pressure stands in for a pressure transmitter in fault (mode 3) only while
+/// its standard deviation is at most this, mca (3 ADC codes of the bench's 0..10 mca loop is
+/// 0.01; a 2 % band at 2.5 mca is 0.05): else the loop holds its last torque and alarms.
+pub const VIRTUAL_PRESSURE_MAX_SD_MCA: f32 = 0.05;
 
 /// A failed white-box step shows in status bit 1 (any alarm) for this long, ms.
 pub const MODEL_FAULT_SHOWN_MS: u32 = 2000;
@@ -284,6 +291,8 @@ pub struct Commands {
     pub stop_writes: u16,
     /// The protections (holding registers 5..=7).
     pub protection: ProtectionConfig,
+    /// The pressure and flow loops' settings (holding registers 8..=14).
+    pub control: ControlSettings,
 }
 
 /// What the VFD link last established (see [`crate::vfd::VfdMaster`]).
@@ -389,6 +398,36 @@ pub struct Controller<const NP: usize, const HP: usize, const NF: usize, const H
     protect_reads: (u32, u32),
     virtual_bench: bool,
     out: Published,
+    /// The pressure or flow loop (modes 3 and 4), from its first control period on.
+    regulator: Option<Regulator>,
+    /// The mode acted on at the last step (stop while held); `None` before the first.
+    last_mode: Option<Mode>,
+    /// The mode acts in closed loop (the last step's): the next control ticks sample.
+    regulating: bool,
+    /// After a mode switch, the torque moves from the last applied one toward the new mode's
+    /// at the rate limit until it gets there.
+    transfer: bool,
+    /// The applied torque of the last step, %.
+    last_applied_pct: f32,
+    /// The requested torque of the last step, %.
+    last_requested_pct: f32,
+    /// The VFD link was in alarm at the last step.
+    link_was_down: bool,
+    /// The observer's last estimate, as the loops use it.
+    view: LoopView,
+    /// The loop's flags this step: acting on the observer's value, holding for lack of one.
+    virtual_measurement: bool,
+    control_held: bool,
+}
+
+/// What the loops take from the observer's last estimate.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct LoopView {
+    load: Load<f32>,
+    speed_rpm: f32,
+    flow_lps: f32,
+    pressure_mca: f32,
+    pressure_sd_mca: f32,
 }
 
 impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
@@ -417,6 +456,7 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
         let observer = Observer::new(ObserverConfig::paper(), 0.0).map_err(Error::Observer)?;
         let whitebox = WhiteBox::<f32>::paper();
         let wb = whitebox.steady_state(0.0).map_err(Error::Bench)?;
+        let paper_k2 = whitebox.params().valve_k2;
         let mut c = Self {
             whitebox,
             wb,
@@ -442,6 +482,26 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             protect_reads: (0, 0),
             virtual_bench: config.virtual_bench,
             out: Published::default(),
+            regulator: None,
+            last_mode: None,
+            regulating: false,
+            transfer: false,
+            last_applied_pct: 0.0,
+            last_requested_pct: 0.0,
+            link_was_down: false,
+            view: LoopView {
+                load: Load {
+                    valve_k2: paper_k2,
+                    head_scale: 1.0,
+                    torque_scale: 1.0,
+                },
+                speed_rpm: 0.0,
+                flow_lps: 0.0,
+                pressure_mca: 0.0,
+                pressure_sd_mca: f32::INFINITY,
+            },
+            virtual_measurement: false,
+            control_held: false,
         };
         let s = c.whitebox.signals(&c.wb);
         c.pressure.reseed(Arithmetic::F32, 0.0, s.pressure_mca);
@@ -455,12 +515,24 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
     }
 
     /// Which transmitters the next step samples: (pressure, flow). A board converts only
-    /// those (a virtual bench draws its noise only for those).
+    /// those (a virtual bench draws its noise only for those): each model's own period, and
+    /// both on every control tick while a loop acts (modes 3 and 4).
     pub fn samples_due(&self) -> (bool, bool) {
+        let control = self.control_due();
         (
-            self.t_ms.is_multiple_of(self.pressure.period_ms),
-            self.t_ms.is_multiple_of(self.flow.period_ms),
+            control || self.t_ms.is_multiple_of(self.pressure.period_ms),
+            control || self.t_ms.is_multiple_of(self.flow.period_ms),
         )
+    }
+
+    /// The next step is a loop's control tick ([`crate::regulate::CONTROL_PHASE_MS`]).
+    fn control_due(&self) -> bool {
+        self.regulating && self.t_ms % CONTROL_PERIOD_MS == CONTROL_PHASE_MS
+    }
+
+    /// The pressure or flow loop, while one acts.
+    pub fn regulator(&self) -> Option<&Regulator> {
+        self.regulator.as_ref()
     }
 
     /// What the SCADA registers hold now.
@@ -522,9 +594,35 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             .update(&c.protection, dt, bits, c.mode == Mode::Stop, ack)
     }
 
-    fn requested_torque_pct(&mut self, c: &Commands) -> f32 {
+    /// The torque the mode asks for this step, before the link's substitution, with the
+    /// transfer ramp after a mode switch. `readings` are this step's control samples
+    /// (pressure, flow: `Some` on a control tick, the reading unless in fault).
+    fn requested_torque_pct(
+        &mut self,
+        inp: &Inputs,
+        readings: Option<(Option<f32>, Option<f32>)>,
+    ) -> f32 {
+        let c = &inp.commands;
         let mode = if self.hold { Mode::Stop } else { c.mode };
-        match mode {
+        if self.last_mode != Some(mode) {
+            // A switch (a trip's hold included): the loop restarts bumplessly, the torque
+            // moves at the rate limit (a trip's 0 % excepted, below).
+            self.transfer = self.last_mode.is_some();
+            self.regulator = None;
+            self.last_mode = Some(mode);
+        }
+        let link_down = inp.vfd.link_alarm;
+        if link_down != self.link_was_down {
+            // The reference was not delivered (0 % applied): the loop restarts bumplessly from
+            // the applied torque when the link returns.
+            self.link_was_down = link_down;
+            if !link_down {
+                self.regulator = None;
+            }
+        }
+        self.virtual_measurement = false;
+        self.control_held = false;
+        let wanted = match mode {
             Mode::Stop => {
                 self.profile = None;
                 0.0
@@ -540,7 +638,75 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
                     .get_or_insert_with(|| McuPulses::paper(seed, TICK_MS));
                 p.next().map_or(0.0, |(_, u)| u)
             }
+            Mode::Pressure | Mode::Flow => {
+                self.profile = None;
+                self.regulate(mode, inp, readings)
+            }
+        };
+        if self.hold {
+            // A trip: 0 % at once, never ramped.
+            self.transfer = false;
+            return 0.0;
         }
+        if !self.transfer {
+            return wanted;
+        }
+        let step = c.control.rate_pct_per_s * TICK_MS as f32 * 1e-3;
+        let from = self.last_applied_pct;
+        let moved = wanted.max(from - step).min(from + step);
+        if moved == wanted {
+            self.transfer = false;
+        }
+        moved
+    }
+
+    /// The loop's torque this step (modes 3 and 4): a new one on a control tick, else the
+    /// last (the torque applied before the loop's first period, for a bumpless start).
+    fn regulate(
+        &mut self,
+        mode: Mode,
+        inp: &Inputs,
+        readings: Option<(Option<f32>, Option<f32>)>,
+    ) -> f32 {
+        let Some((pressure, flow)) = readings else {
+            return self
+                .regulator
+                .map_or(self.last_requested_pct, |r| r.last().torque_pct);
+        };
+        let s = &inp.commands.control;
+        let v = self.view;
+        let (controlled, setpoint, measured) = match mode {
+            Mode::Flow => {
+                // The virtual flow meter: the observer's flow when the meter is in fault.
+                self.virtual_measurement = flow.is_none();
+                (
+                    Controlled::Flow,
+                    s.flow_setpoint_lps,
+                    flow.unwrap_or(v.flow_lps),
+                )
+            }
+            _ => {
+                let virtual_ok = v.pressure_sd_mca <= VIRTUAL_PRESSURE_MAX_SD_MCA;
+                self.virtual_measurement = pressure.is_none() && virtual_ok;
+                self.control_held = pressure.is_none() && !virtual_ok;
+                let measured =
+                    pressure.unwrap_or(if virtual_ok { v.pressure_mca } else { f32::NAN });
+                (Controlled::Pressure, s.pressure_setpoint_mca, measured)
+            }
+        };
+        if inp.vfd.link_alarm || self.control_held {
+            // Nothing delivered (0 % applied), or nothing to act on: frozen.
+            return self
+                .regulator
+                .as_mut()
+                .map_or(self.last_requested_pct, |r| r.hold().torque_pct);
+        }
+        let applied = self.last_applied_pct;
+        let r = self
+            .regulator
+            .get_or_insert_with(|| Regulator::new(controlled, measured, applied, v.speed_rpm));
+        r.step(self.whitebox.params(), v.load, s, setpoint, measured)
+            .torque_pct
     }
 
     /// One observer step over the pressure period, then the alarms.
@@ -577,6 +743,17 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             flow_fault: self.flow_in.faulted(),
             vfd_link_alarm: inp.vfd.link_alarm,
         });
+        self.view = LoopView {
+            load: Load {
+                valve_k2: e.valve_k2,
+                head_scale: e.head_scale,
+                torque_scale: e.torque_scale,
+            },
+            speed_rpm: e.speed_rpm,
+            flow_lps: e.flow_lps,
+            pressure_mca: e.pressure_mca,
+            pressure_sd_mca: e.pressure_sd_mca,
+        };
         let o = &mut self.out;
         o.alarms = self.monitor.bits();
         o.observer_speed_rpm = e.speed_rpm;
@@ -588,10 +765,26 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
     /// One millisecond (see the module docs).
     pub fn step(&mut self, inp: &Inputs) -> Outputs {
         let now = self.t_ms;
-        let (take_p, take_q) = self.samples_due();
+        let control = self.control_due();
+        let take_p = now.is_multiple_of(self.pressure.period_ms);
+        let take_q = now.is_multiple_of(self.flow.period_ms);
         self.hold = self.protect(inp);
-        let requested = self.requested_torque_pct(&inp.commands);
+        // A control tick is never a model's sample tick (CONTROL_PHASE_MS): its samples are
+        // the loop's alone, read before the torque they decide.
+        let readings = control.then(|| {
+            let p = self.pressure_in.sample(inp.pressure_code);
+            let q = self.flow_in.sample(inp.flow_code);
+            self.out.pressure_mca = p.value;
+            self.out.flow_lps = q.value;
+            (
+                (p.status != InputStatus::Fault).then_some(p.value),
+                (q.status != InputStatus::Fault).then_some(q.value),
+            )
+        });
+        let requested = self.requested_torque_pct(inp, readings);
         let u = inp.vfd.applied_torque_pct(requested);
+        self.last_applied_pct = u;
+        self.last_requested_pct = requested;
         self.torque_sum += u;
         self.torque_ticks += 1;
 
@@ -676,6 +869,7 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
                 || q_fault
                 || model_fault
                 || self.protection.tripped()
+                || self.control_held
                 || o.alarms & !model_core::monitor::LOAD_CHANGED != 0,
             extrapolating: self.wb_extrapolating || self.nx_clamped.iter().any(|&c| c),
             vfd_link_ok: link_ok,
@@ -683,14 +877,27 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             flow_fault: q_fault,
             vfd_readings_invalid: blind,
             tripped: self.protection.tripped(),
+            in_control: self.regulator.is_some() && link_ok && !self.control_held && !self.hold,
+            limited: self.regulator.is_some_and(|r| r.last().limited),
+            virtual_measurement: self.virtual_measurement,
+            control_held: self.control_held,
+            holds_flow: self
+                .regulator
+                .is_some_and(|r| r.controlled() == Controlled::Flow),
         }
         .bits();
+        let l = self.regulator.map(|r| r.last());
+        o.active_setpoint = l.map_or(0.0, |l| l.reference);
+        o.control_error = l.map_or(0.0, |l| l.error);
+        o.feedforward_pct = l.map_or(0.0, |l| l.feedforward_pct);
+        o.integral_pct = l.map_or(0.0, |l| l.integral_pct);
         o.torque_pct = u;
         o.vfd_speed_rpm = readings.speed_rpm;
         o.vfd_torque_pct = readings.torque_pct;
         o.vfd_status = readings.status;
         o.uptime_s = (now / 1000) as u16;
 
+        self.regulating = !self.hold && inp.commands.mode.regulates();
         self.t_ms = now.wrapping_add(TICK_MS);
         Outputs {
             t_ms: now,

@@ -21,6 +21,7 @@ pub mod analog;
 pub mod control;
 pub mod link;
 pub mod modbus;
+pub mod plant;
 pub mod protect;
 pub mod regulate;
 pub mod rtu;

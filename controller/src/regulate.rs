@@ -1,14 +1,70 @@
-//! PROTOTYPE (issue 18 groundwork, not wired into `Controller::step`): a pressure or flow loop
-//! that knows the pump. Feedforward from the white-box's steady state run backwards at the
-//! estimated load ([`model_core::inverse::steady_torque`]), a PI scheduled on the bench
-//! linearised there ([`model_core::inverse::linearise`]: IMC tuning of a first-order plant,
-//! `Kc = τ / (K λ)`, `Ti = τ`), acting on the error to a first-order reference model of the
-//! setpoint; torque limits and a rate limit, the integrator frozen while limited.
+//! The pressure and flow loops of modes 3 and 4: a loop that knows the pump.
+//!
+//! Every [`CONTROL_PERIOD_MS`] the [`Regulator`] gives the torque reference for a setpoint and
+//! a measurement (the transmitter's reading, or the observer's in its fault):
+//!
+//! - the setpoint passes a first-order reference model
+//!   ([`ControlSettings::setpoint_filter_s`], 0.25 s by default): the loop follows `r(t)`,
+//!   not the step;
+//! - **feedforward** ([`ControlLaw::Model`]): the white-box model's steady state run backwards
+//!   ([`model_core::inverse::steady_torque_near`], Newton warm-started from the last period's)
+//!   at the load the observer estimates now (k2, head and torque curve scales): the torque
+//!   that holds `r + τ dr/dt` (the plant's first-order lag inverted, τ its time constant at
+//!   the point), so the feedforward alone nearly follows the reference;
+//! - a **PI** on `r − y` whose gains are scheduled on the bench linearised at the point
+//!   ([`model_core::inverse::linearise`]: static gain K, time constant τ, both changing ×3.5
+//!   across the range): IMC tuning of a first-order plant, `Kc = τ / (K λ)`, `Ti = τ`, with
+//!   λ = [`PRESSURE_CLOSED_LOOP_S`] or [`FLOW_CLOSED_LOOP_S`];
+//! - [`ControlLaw::Pi`]: the PI alone with one gain set ([`PI_PRESSURE`], [`PI_FLOW`]: the same
+//!   IMC rule at one operating point), as a drive ships it: the comparison;
+//! - the torque within [`ControlSettings::torque_min_pct`]..=[`ControlSettings::torque_max_pct`]
+//!   and moving at most [`ControlSettings::rate_pct_per_s`]; the integrator is held while the
+//!   torque is held at a limit in the error's direction (conditional integration), and the
+//!   caller freezes the whole loop while the VFD link is down ([`Regulator::hold`]);
+//! - bumpless start: the integrator takes what the feedforward and the proportional part leave
+//!   of the torque applied at the start, and the reference starts at the measured value.
+//!
+//! The loops run at [`CONTROL_PERIOD_MS`] on ticks [`CONTROL_PHASE_MS`] after the observer's,
+//! so the two never share a 1 ms step (the step's worst case stays the observer's).
 
-use model_core::inverse::{linearise, steady_torque, Load, Target};
+use crate::types::{ControlLaw, ControlSettings};
+use model_core::inverse::{linearise, steady_torque_near, Load, SteadyInverse, Target};
 use model_core::BenchParams;
 
-/// What the loop holds.
+/// Control period, ms: the loops' step and the transmitters' sampling for control.
+pub const CONTROL_PERIOD_MS: u32 = 5;
+/// The loops run on the ticks `t ≡ CONTROL_PHASE_MS (mod CONTROL_PERIOD_MS)`: never on an
+/// observer step's tick (those are multiples of the pressure period, 50 ms).
+pub const CONTROL_PHASE_MS: u32 = 2;
+/// Closed-loop time constant asked of the pressure PI (IMC λ), s.
+pub const PRESSURE_CLOSED_LOOP_S: f32 = 0.15;
+/// Closed-loop time constant asked of the flow PI (IMC λ), s: slower than the pressure's,
+/// the flow transmitter lags more (the paper's settles in ≈ 0.1 s; 150 ms lags are common).
+pub const FLOW_CLOSED_LOOP_S: f32 = 0.3;
+
+/// A PI's gains.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PiGains {
+    /// Proportional gain, % per unit of the controlled value (per mca, per l/s).
+    pub kc: f32,
+    /// Integral time, s (> 0).
+    pub ti_s: f32,
+}
+
+/// [`ControlLaw::Pi`]'s pressure gains: IMC (λ = [`PRESSURE_CLOSED_LOOP_S`]) on the paper's
+/// bench linearised at 3 mca with the paper's valve (τ = 0.285 s; a test recomputes them).
+pub const PI_PRESSURE: PiGains = PiGains {
+    kc: 35.26,
+    ti_s: 0.2855,
+};
+/// [`ControlLaw::Pi`]'s flow gains: IMC (λ = [`FLOW_CLOSED_LOOP_S`]) at 12 l/s with the
+/// paper's valve (τ = 0.452 s; a test recomputes them).
+pub const PI_FLOW: PiGains = PiGains {
+    kc: 7.265,
+    ti_s: 0.4522,
+};
+
+/// What a loop holds.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Controlled {
     /// Outlet pressure, mca.
@@ -17,139 +73,203 @@ pub enum Controlled {
     Flow,
 }
 
-/// The loop's settings.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct RegulatorConfig {
-    /// What is held.
-    pub controlled: Controlled,
-    /// Control period, s (> 0).
-    pub period_s: f32,
-    /// Closed-loop time constant asked of the PI (IMC λ), s (> 0).
-    pub closed_loop_s: f32,
-    /// Time constant of the setpoint's reference model, s (≥ 0; 0: steps go straight in).
-    pub reference_s: f32,
-    /// Torque limits, % (0 ≤ min < max ≤ 100).
-    pub torque_min_pct: f32,
-    /// See `torque_min_pct`.
-    pub torque_max_pct: f32,
-    /// Torque rate limit, %/s (> 0).
-    pub rate_pct_per_s: f32,
-    /// Use the feedforward (false: PI alone around the last torque, gains still scheduled).
-    pub feedforward: bool,
-    /// The feedforward leads by the plant's time constant (the steady torque of
-    /// `r + τ dr/dt`, r the reference model's output).
-    pub dynamic_feedforward: bool,
+impl Controlled {
+    fn target(self, v: f32) -> Target<f32> {
+        match self {
+            Controlled::Pressure => Target::PressureMca(v),
+            Controlled::Flow => Target::FlowLps(v.max(0.0)),
+        }
+    }
+
+    fn closed_loop_s(self) -> f32 {
+        match self {
+            Controlled::Pressure => PRESSURE_CLOSED_LOOP_S,
+            Controlled::Flow => FLOW_CLOSED_LOOP_S,
+        }
+    }
+
+    fn fixed_gains(self) -> PiGains {
+        match self {
+            Controlled::Pressure => PI_PRESSURE,
+            Controlled::Flow => PI_FLOW,
+        }
+    }
 }
 
-/// One step's result.
+/// One period's result.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RegulatorOutput {
-    /// Torque reference, %.
+    /// Torque reference, % (within the limits).
     pub torque_pct: f32,
-    /// The feedforward part, %.
+    /// The active setpoint (the reference model's output), in the controlled value's unit.
+    pub reference: f32,
+    /// The control error `reference − measured`.
+    pub error: f32,
+    /// The feedforward part, % (0 for [`ControlLaw::Pi`]).
     pub feedforward_pct: f32,
     /// The integral part, %.
     pub integral_pct: f32,
-    /// The torque was limited (range or rate).
+    /// The torque was held at a limit (range or rate).
     pub limited: bool,
 }
 
-/// The loop's state.
+/// A loop's state.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Regulator {
-    config: RegulatorConfig,
+    controlled: Controlled,
     reference: f32,
     integral_pct: f32,
     last_pct: f32,
     fresh: bool,
+    /// The last period's steady state (Newton's start).
+    near: SteadyInverse<f32>,
+    last: RegulatorOutput,
 }
 
 impl Regulator {
-    /// Starts bumplessly from the torque applied now and the value measured now.
-    pub fn new(config: RegulatorConfig, measured: f32, torque_pct: f32) -> Self {
+    /// A loop on `controlled` that starts bumplessly from the torque applied now and the value
+    /// measured now; `speed_rpm` (the observer's) starts the inverse's Newton search.
+    pub fn new(controlled: Controlled, measured: f32, torque_pct: f32, speed_rpm: f32) -> Self {
+        let measured = if measured.is_finite() { measured } else { 0.0 };
+        let torque_pct = if torque_pct.is_finite() {
+            torque_pct
+        } else {
+            0.0
+        };
         Self {
-            config,
+            controlled,
             reference: measured,
             integral_pct: 0.0,
             last_pct: torque_pct,
             fresh: true,
+            near: SteadyInverse {
+                torque_ref_pct: torque_pct,
+                speed_rpm,
+                flow_lps: 0.0,
+                pressure_mca: 0.0,
+                limited: false,
+            },
+            last: RegulatorOutput {
+                torque_pct,
+                reference: measured,
+                error: 0.0,
+                feedforward_pct: 0.0,
+                integral_pct: 0.0,
+                limited: false,
+            },
         }
     }
 
+    /// What the loop holds.
+    pub fn controlled(&self) -> Controlled {
+        self.controlled
+    }
+
+    /// The last period's output.
+    pub fn last(&self) -> RegulatorOutput {
+        self.last
+    }
+
+    /// A period without a measurement to act on (or with the torque not delivered): the last
+    /// torque, the integrator and the reference frozen.
+    pub fn hold(&mut self) -> RegulatorOutput {
+        self.last
+    }
+
     /// One control period: the torque for `setpoint` given `measured`, on the bench `bench`
-    /// against the estimated `load`.
+    /// against the estimated `load`, with `s`'s limits, rate, filter and law. A NaN or
+    /// infinite setpoint or measurement holds the last torque ([`Regulator::hold`]).
     pub fn step(
         &mut self,
         bench: &BenchParams<f32>,
         load: Load<f32>,
+        s: &ControlSettings,
         setpoint: f32,
         measured: f32,
     ) -> RegulatorOutput {
-        let c = &self.config;
-        let a = if c.reference_s > 0.0 {
-            (c.period_s / c.reference_s).min(1.0)
+        if !(setpoint.is_finite() && measured.is_finite()) {
+            return self.hold();
+        }
+        let period_s = CONTROL_PERIOD_MS as f32 * 1e-3;
+        let a = if s.setpoint_filter_s > period_s {
+            period_s / s.setpoint_filter_s
         } else {
             1.0
         };
         self.reference += (setpoint - self.reference) * a;
-        let at = |v: f32| match c.controlled {
-            Controlled::Pressure => Target::PressureMca(v),
-            Controlled::Flow => Target::FlowLps(v.max(0.0)),
-        };
-        // The reference's rate, for the feedforward's dynamic part (the plant's first-order
-        // lag inverted: the steady torque of `r + τ dr/dt`).
-        let rate = if c.reference_s > 0.0 {
-            (setpoint - self.reference) / c.reference_s
+        // The reference's rate, for the feedforward's dynamic part.
+        let rate = if a < 1.0 {
+            (setpoint - self.reference) / s.setpoint_filter_s
         } else {
             0.0
         };
-        let (ff, kc, ti) = match steady_torque(bench, load, at(self.reference)) {
-            Ok(inv) => {
-                let (gain, tau) = match linearise(bench, load, &inv) {
-                    Some(l) => (
-                        match c.controlled {
-                            Controlled::Pressure => l.pressure_gain_mca_per_pct,
-                            Controlled::Flow => l.flow_gain_lps_per_pct,
-                        },
-                        l.time_constant_s,
-                    ),
-                    None => (0.055, 0.4),
-                };
-                let ff = match steady_torque(bench, load, at(self.reference + tau * rate)) {
-                    Ok(ahead) if c.dynamic_feedforward => ahead.torque_ref_pct,
-                    _ => inv.torque_ref_pct,
-                };
-                (ff, tau / (gain * c.closed_loop_s), tau)
-            }
-            Err(_) => (self.last_pct, 0.0, 1.0),
+        let (ff, gains) = match s.law {
+            ControlLaw::Pi => (0.0, self.controlled.fixed_gains()),
+            ControlLaw::Model => self.model_terms(bench, load, rate),
         };
-        let ff = if c.feedforward { ff } else { 0.0 };
         let e = self.reference - measured;
         if self.fresh {
-            // Bumpless: the integral takes what the feedforward and the proportional part
-            // leave of the torque applied now.
-            self.integral_pct = self.last_pct - ff - kc * e;
+            self.integral_pct = self.last_pct - ff - gains.kc * e;
             self.fresh = false;
         }
-        let di = kc * c.period_s / ti * e;
-        let wanted = ff + kc * e + self.integral_pct + di;
-        let step = c.rate_pct_per_s * c.period_s;
-        let lo = c.torque_min_pct.max(self.last_pct - step);
-        let hi = c.torque_max_pct.min(self.last_pct + step);
-        let torque = wanted.clamp(lo, hi);
+        let di = gains.kc * period_s / gains.ti_s * e;
+        let wanted = ff + gains.kc * e + self.integral_pct + di;
+        let step = s.rate_pct_per_s * period_s;
+        let lo = s.torque_min_pct.max(self.last_pct - step);
+        let hi = s.torque_max_pct.min(self.last_pct + step);
+        // `wanted` is finite (its parts are); max/min rather than clamp: no panic path on the
+        // MCU, and lo > hi (limits moved under the torque) resolves to the range's side.
+        let torque = wanted.max(lo).min(hi);
         let limited = torque != wanted;
-        // Conditional integration: not while the torque is held at a limit in the error's
-        // direction.
         if !(limited && (wanted - torque) * di > 0.0) {
             self.integral_pct += di;
         }
         self.last_pct = torque;
-        RegulatorOutput {
+        self.last = RegulatorOutput {
             torque_pct: torque,
+            reference: self.reference,
+            error: e,
             feedforward_pct: ff,
             integral_pct: self.integral_pct,
             limited,
-        }
+        };
+        self.last
+    }
+
+    /// The feedforward and the scheduled gains at the reference now.
+    fn model_terms(
+        &mut self,
+        bench: &BenchParams<f32>,
+        load: Load<f32>,
+        rate: f32,
+    ) -> (f32, PiGains) {
+        let c = self.controlled;
+        let Ok(inv) = steady_torque_near(bench, load, c.target(self.reference), &self.near) else {
+            // No steady state for the reference (beyond the pump, or a load the observer has
+            // not got yet): the PI alone around the last torque.
+            return (0.0, c.fixed_gains());
+        };
+        self.near = inv;
+        let Some(l) = linearise(bench, load, &inv) else {
+            return (inv.torque_ref_pct, c.fixed_gains());
+        };
+        let gain = match c {
+            Controlled::Pressure => l.pressure_gain_mca_per_pct,
+            Controlled::Flow => l.flow_gain_lps_per_pct,
+        };
+        let tau = l.time_constant_s;
+        let ff = match steady_torque_near(bench, load, c.target(self.reference + tau * rate), &inv)
+        {
+            Ok(ahead) => ahead.torque_ref_pct,
+            Err(_) => inv.torque_ref_pct,
+        };
+        (
+            ff,
+            PiGains {
+                kc: tau / (gain * c.closed_loop_s()),
+                ti_s: tau,
+            },
+        )
     }
 }
 
@@ -157,7 +277,45 @@ impl Regulator {
 mod tests {
     use super::*;
     use crate::analog::lag_1ms;
+    use model_core::inverse::{linearise, steady_torque};
     use model_core::{Scheme, WhiteBox};
+
+    fn paper_load(p: &BenchParams<f32>) -> Load<f32> {
+        Load {
+            valve_k2: p.valve_k2,
+            head_scale: 1.0,
+            torque_scale: 1.0,
+        }
+    }
+
+    /// [`PI_PRESSURE`] and [`PI_FLOW`] are the IMC rule at their operating points.
+    #[test]
+    fn the_fixed_gains_are_the_imc_rule_at_one_point() {
+        let p = BenchParams::<f32>::PAPER;
+        let load = paper_load(&p);
+        for (target, lambda, gains) in [
+            (
+                Target::PressureMca(3.0),
+                PRESSURE_CLOSED_LOOP_S,
+                PI_PRESSURE,
+            ),
+            (Target::FlowLps(12.0), FLOW_CLOSED_LOOP_S, PI_FLOW),
+        ] {
+            let inv = steady_torque(&p, load, target).unwrap();
+            let l = linearise(&p, load, &inv).unwrap();
+            let k = match target {
+                Target::PressureMca(_) => l.pressure_gain_mca_per_pct,
+                Target::FlowLps(_) => l.flow_gain_lps_per_pct,
+            };
+            let kc = l.time_constant_s / (k * lambda);
+            assert!((kc / gains.kc - 1.0).abs() < 0.01, "{target:?}: Kc {kc}");
+            assert!(
+                (l.time_constant_s / gains.ti_s - 1.0).abs() < 0.01,
+                "{target:?}: Ti {}",
+                l.time_constant_s
+            );
+        }
+    }
 
     /// Step response figures of `y` toward `to` from `from`, sampled every ms from the step.
     fn figures(y: &[f32], from: f32, to: f32) -> (f32, f32, f32) {
@@ -175,41 +333,29 @@ mod tests {
     }
 
     /// A closed loop on the white-box (RK4, 1 ms) with a 20 ms pressure transmitter,
-    /// pressure steps 2 → 4 → 1 → 3 mca, the feedforward on the true load; prints the figures.
-    fn run(feedforward: bool, dynamic: bool, period_s: f32) -> Vec<(f32, f32, f32)> {
+    /// pressure steps 2 → 4 → 1 → 3 mca, the feedforward on the true load; the figures.
+    fn run(law: ControlLaw) -> Vec<(f32, f32, f32)> {
         let p = BenchParams::<f32>::PAPER;
         let bench = WhiteBox::new(p).unwrap();
-        let load = Load {
-            valve_k2: p.valve_k2,
-            head_scale: 1.0,
-            torque_scale: 1.0,
-        };
+        let load = paper_load(&p);
         let u0 = steady_torque(&p, load, Target::PressureMca(2.0))
             .unwrap()
             .torque_ref_pct;
         let mut st = bench.steady_state(u0).unwrap();
         let mut seen = bench.signals(&st).pressure_mca;
-        let config = RegulatorConfig {
-            controlled: Controlled::Pressure,
-            period_s,
-            closed_loop_s: 0.15,
-            reference_s: 0.25,
-            torque_min_pct: 0.0,
-            torque_max_pct: 100.0,
-            rate_pct_per_s: 200.0,
-            feedforward,
-            dynamic_feedforward: dynamic,
+        let s = ControlSettings {
+            law,
+            ..ControlSettings::DEFAULT
         };
-        let mut reg = Regulator::new(config, seen, u0);
+        let mut reg = Regulator::new(Controlled::Pressure, seen, u0, st.speed_rpm);
         let mut u = u0;
-        let every = (period_s * 1000.0).round() as usize;
         let mut out = vec![];
         let mut from = 2.0;
         for (i, to) in [2.0f32, 4.0, 1.0, 3.0].into_iter().enumerate() {
             let mut y = vec![];
-            for k in 0..6000 {
-                if k % every == 0 {
-                    u = reg.step(&p, load, to, seen).torque_pct;
+            for k in 0..6000u32 {
+                if k % CONTROL_PERIOD_MS == 0 {
+                    u = reg.step(&p, load, &s, to, seen).torque_pct;
                     assert!(u.is_finite() && (0.0..=100.0).contains(&u));
                 }
                 bench.step(&mut st, u, 1e-3, Scheme::Rk4).unwrap();
@@ -225,90 +371,55 @@ mod tests {
         out
     }
 
+    /// On the model itself (the load known), the model-based law settles every step faster
+    /// than the PI alone, within the issue's targets (rise ≤ 0.5 / 0.8 s, overshoot ≤ 5 %,
+    /// settling ≤ 1.0 / 2.5 s up / down).
     #[test]
     fn pressure_steps_on_the_white_box() {
-        for (ff, dynamic, period) in [
-            (true, false, 0.005),
-            (true, true, 0.005),
-            (false, false, 0.005),
-        ] {
-            let f = run(ff, dynamic, period);
-            eprintln!("feedforward {ff} (dynamic {dynamic}), period {period} s: (rise s, overshoot %, settle s) {f:?}");
-            for (rise, over, settle) in f {
-                assert!(rise.is_finite() && over.is_finite() && settle < 6.0);
+        let model = run(ControlLaw::Model);
+        let pi = run(ControlLaw::Pi);
+        eprintln!("model (rise s, overshoot %, settle s): {model:?}\nPI alone: {pi:?}");
+        for (k, (&(rise, over, settle), &(_, _, pi_settle))) in model.iter().zip(&pi).enumerate() {
+            let up = k != 1;
+            assert!(rise <= if up { 0.5 } else { 0.8 }, "{model:?}");
+            assert!(over <= 5.0, "{model:?}");
+            assert!(settle <= if up { 1.0 } else { 2.5 }, "{model:?}");
+            if up {
+                assert!(settle < pi_settle, "{model:?} vs {pi:?}");
             }
         }
     }
 
-    /// Valve steps ×1.3, ×1, ×0.7, ×1 while holding 3 mca: the time back within 2 % after
-    /// each, with the feedforward at the true k2 (as a perfect observer would give) and at the
-    /// paper's (no observer); prints them.
+    /// The torque never leaves its limits nor moves faster than its rate, whatever the
+    /// setpoints and measurements (NaN and infinities included), and a NaN holds.
     #[test]
-    fn valve_steps_on_the_white_box() {
+    fn limits_and_rate_hold_for_any_input() {
         let p = BenchParams::<f32>::PAPER;
-        for known in [true, false] {
-            let mut bench = WhiteBox::new(p).unwrap();
-            let mut load = Load {
-                valve_k2: p.valve_k2,
-                head_scale: 1.0,
-                torque_scale: 1.0,
-            };
-            let u0 = steady_torque(&p, load, Target::PressureMca(3.0))
-                .unwrap()
-                .torque_ref_pct;
-            let mut st = bench.steady_state(u0).unwrap();
-            let mut seen = bench.signals(&st).pressure_mca;
-            let config = RegulatorConfig {
-                controlled: Controlled::Pressure,
-                period_s: 0.005,
-                closed_loop_s: 0.15,
-                reference_s: 0.25,
-                torque_min_pct: 0.0,
-                torque_max_pct: 100.0,
-                rate_pct_per_s: 200.0,
-                feedforward: true,
-                dynamic_feedforward: true,
-            };
-            let mut reg = Regulator::new(config, seen, u0);
-            let mut u = u0;
-            let mut back = vec![];
-            for factor in [1.0f32, 1.3, 1.0, 0.7, 1.0] {
-                let k2 = p.valve_k2 * factor;
-                bench.set_load(k2, p.static_head_c_mca).unwrap();
-                if known {
-                    load.valve_k2 = k2;
+        let s = ControlSettings {
+            torque_min_pct: 10.0,
+            torque_max_pct: 80.0,
+            ..ControlSettings::DEFAULT
+        };
+        let step = s.rate_pct_per_s * CONTROL_PERIOD_MS as f32 * 1e-3;
+        for law in [ControlLaw::Model, ControlLaw::Pi] {
+            let s = ControlSettings { law, ..s };
+            let mut reg = Regulator::new(Controlled::Pressure, 2.0, 40.0, 1500.0);
+            let mut last = 40.0f32;
+            let values = [0.0f32, 3.0, 60.0, -5.0, 1e30, f32::NAN, f32::INFINITY, 2.5];
+            for (k, &sp) in values.iter().cycle().take(400).enumerate() {
+                let y = values[(k * 3 + 1) % values.len()];
+                let o = reg.step(&p, paper_load(&p), &s, sp, y);
+                assert!(o.torque_pct.is_finite(), "{o:?}");
+                assert!((10.0..=80.0).contains(&o.torque_pct) || o.torque_pct == last);
+                assert!(
+                    (o.torque_pct - last).abs() <= step * 1.0001,
+                    "{last} -> {o:?}"
+                );
+                if !(sp.is_finite() && y.is_finite()) {
+                    assert_eq!(o.torque_pct, last, "a NaN or infinity holds");
                 }
-                let mut last_out = 0;
-                for k in 0..5000 {
-                    if k % 5 == 0 {
-                        u = reg.step(&p, load, 3.0, seen).torque_pct;
-                    }
-                    bench.step(&mut st, u, 1e-3, Scheme::Rk4).unwrap();
-                    let p_now = bench.signals(&st).pressure_mca;
-                    lag_1ms(&mut seen, p_now, 0.02);
-                    if (p_now - 3.0).abs() > 0.06 {
-                        last_out = k + 1;
-                    }
-                }
-                back.push(last_out as f32 * 1e-3);
+                last = o.torque_pct;
             }
-            eprintln!(
-                "k2 known {known}: back within 2 % after valve x1.3, x1, x0.7, x1: {:?} s",
-                &back[1..]
-            );
-            // 3 mca at valve ×0.7 needs more than 100 % torque on the paper's bench (the
-            // inverse says so): never back; every other step is.
-            let reach = |f: f32| {
-                let l = Load {
-                    valve_k2: p.valve_k2 * f,
-                    ..load
-                };
-                !steady_torque(&p, l, Target::PressureMca(3.0))
-                    .unwrap()
-                    .limited
-            };
-            assert!(!reach(0.7) && reach(1.3) && reach(1.0));
-            assert!(back[1] < 5.0 && back[2] < 5.0 && back[4] < 5.0, "{back:?}");
         }
     }
 }

@@ -5,7 +5,7 @@
 //!
 //! | input register (FC 04) | meaning | unit |
 //! |---|---|---|
-//! | 0 | status bits: 0 running (commanded to run and not held at 0 % by a trip), 1 any alarm, 2 model extrapolating, 3 VFD link ok (the torque reference is delivered), 4 pressure transmitter fault, 5 flow transmitter fault, 6 VFD readings invalid (reads fail: registers 14-16 read 0), 7 tripped (the torque is held at 0 %: [`crate::protect`]), 8 saturated (a value in this map is beyond its register's range and reads as the range's end) | |
+//! | 0 | status bits: 0 running (commanded to run and not held at 0 % by a trip), 1 any alarm, 2 model extrapolating, 3 VFD link ok (the torque reference is delivered), 4 pressure transmitter fault, 5 flow transmitter fault, 6 VFD readings invalid (reads fail: registers 14-16 read 0), 7 tripped (the torque is held at 0 %: [`crate::protect`]), 8 saturated (a value in this map is beyond its register's range and reads as the range's end), 9 in control (mode 3 or 4 acting), 10 limited (the loop's torque at a limit or its rate), 11 virtual measurement (the loop acts on the observer's flow or pressure: its transmitter in fault), 12 control held (pressure lost and the observer's not trustworthy: the last torque held, any-alarm set), 13 the loop holds a flow (registers 26, 27 in 0.01 l/s) | |
 //! | 1 | applied torque reference | 0.01 % |
 //! | 2 | measured pressure | 0.001 mca, signed |
 //! | 3 | measured flow | 0.01 l/s |
@@ -31,17 +31,28 @@
 //! | 23 | trip causes: the alarm bits (as 21) that tripped the controller; 0 when not tripped | |
 //! | 24 | VFD actual speed, as 14 in whole rpm (±32 767 rpm; 14 saturates at ±3 276.7) | rpm, signed |
 //! | 25 | observer valve coefficient k2, as 20 in 1e-4 (the observer's whole 0.02..1) | 1e-4 |
+//! | 26 | loop's active setpoint (the setpoint's reference model): 0.001 mca, or 0.01 l/s with status bit 13 (mode 4); 0 in other modes | signed |
+//! | 27 | loop's control error (active setpoint − measured), as 26 | signed |
+//! | 28 | loop's feedforward part | 0.01 %, signed |
+//! | 29 | loop's integral part | 0.01 %, signed |
 //!
 //! | holding register (FC 03, 06, 16) | meaning | range |
 //! |---|---|---|
 //! | 0 | torque setpoint, 0.01 % | 0..=10000 |
-//! | 1 | mode: 0 stop, 1 manual setpoint, 2 built-in excitation profile; writing 0 also acknowledges the latched alarms whose cause has gone | 0..=2 |
+//! | 1 | mode: 0 stop, 1 manual setpoint, 2 built-in excitation profile, 3 pressure control, 4 flow control ([`crate::regulate`]); writing 0 also acknowledges the latched alarms whose cause has gone; a switch moves the torque at the rate of 12 (no step) | 0..=4 |
 //! | 2 | NARMAX arithmetic: 0 f32, 1 Q15 fixed point | 0..=1 |
 //! | 3 | virtual bench only: its valve, k2 in 0.1 % of nominal (1000 = nominal) | 500..=2000 |
 //! | 4 | virtual bench only: fault injection bits: 0 dry run, 1 pressure transmitter at 2 mA, 2 flow transmitter at 2 mA, 3 VFD link cut | 0..=15 |
 //! | 5 | overspeed limit, rpm (default 1925: 110 % of the nominal 1 750) | 100..=4000 |
 //! | 6 | what trips ([`crate::protect`]): bit 0 dry run, bit 1 overspeed, bit 2 no flow; 1 trips to 0 %, 0 warns (default 3) | 0..=7 |
 //! | 7 | no-flow trip delay: how long the no-flow alarm stands before it trips, if bit 2 of 6 is set (default 30) | 1..=3600 s |
+//! | 8 | pressure setpoint of mode 3, 0.001 mca | 0..=65535 |
+//! | 9 | flow setpoint of mode 4, 0.01 l/s | 0..=65535 |
+//! | 10 | torque low limit of modes 3 and 4, 0.01 % (default 0) | 0..=10000, below 11 |
+//! | 11 | torque high limit of modes 3 and 4, 0.01 % (default 10000) | 0..=10000, above 10 |
+//! | 12 | torque rate limit of modes 3 and 4 and of every mode switch, 0.1 %/s (default 2000) | 1..=65535 |
+//! | 13 | setpoint filter of modes 3 and 4 (the reference model's time constant), ms (default 250; 0: none) | 0..=10000 |
+//! | 14 | law of modes 3 and 4: 0 model-based (feedforward and scheduled PI), 1 PI alone (one gain set) | 0..=1 |
 //!
 //! Holding registers 3 and 4 exist only with a virtual bench ([`ScadaSlave::with_virtual_bench`]):
 //! on a board without one they answer exception 02 like any address outside the map, and so
@@ -60,12 +71,17 @@
 use crate::control::Commands;
 use crate::modbus::{serve, signed_register, unsigned_register, Exception, Frame, RegisterMap};
 use crate::protect::{ProtectionConfig, NO_FLOW_TRIP_RANGE_S, OVERSPEED_RANGE_RPM, TRIP_ALL};
-use crate::types::{Arithmetic, InjectedFaults, Mode, Published, VALVE_FACTOR_RANGE};
+use crate::types::{
+    Arithmetic, ControlLaw, ControlSettings, InjectedFaults, Mode, Published, STATUS_CORE_BITS,
+    VALVE_FACTOR_RANGE,
+};
 
 /// Input registers.
-pub const INPUT_REGISTERS: usize = 26;
-/// Holding registers (0..=7; 3 and 4 only with a virtual bench).
-pub const HOLDING_REGISTERS: usize = 8;
+pub const INPUT_REGISTERS: usize = 30;
+/// Holding registers (0..=14; 3 and 4 only with a virtual bench).
+pub const HOLDING_REGISTERS: usize = 15;
+/// Largest setpoint filter (holding register 13), ms.
+pub const SETPOINT_FILTER_MAX_MS: u16 = 10_000;
 /// The holding registers that exist only with a virtual bench.
 pub const BENCH_HOLDING_REGISTERS: core::ops::Range<usize> = 3..5;
 /// Virtual bench valve, 0.1 % of nominal k2: nominal.
@@ -91,16 +107,79 @@ pub fn mode_register(mode: Mode) -> u16 {
         Mode::Stop => 0,
         Mode::Manual => 1,
         Mode::Profile => 2,
+        Mode::Pressure => 3,
+        Mode::Flow => 4,
     }
 }
 
-/// The mode of holding register 1; `None` for a value outside 0..=2.
+/// The mode of holding register 1; `None` for a value outside 0..=4.
 pub fn mode_from_register(v: u16) -> Option<Mode> {
     match v {
         0 => Some(Mode::Stop),
         1 => Some(Mode::Manual),
         2 => Some(Mode::Profile),
+        3 => Some(Mode::Pressure),
+        4 => Some(Mode::Flow),
         _ => None,
+    }
+}
+
+/// The loops' holding registers 8..=14, raw.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ControlRegisters {
+    /// 8: pressure setpoint, 0.001 mca.
+    pub pressure_setpoint: u16,
+    /// 9: flow setpoint, 0.01 l/s.
+    pub flow_setpoint: u16,
+    /// 10: torque low limit, 0.01 % (0..=10000).
+    pub torque_min: u16,
+    /// 11: torque high limit, 0.01 % (0..=10000, above 10).
+    pub torque_max: u16,
+    /// 12: torque rate limit, 0.1 %/s (≥ 1).
+    pub rate: u16,
+    /// 13: setpoint filter, ms (0..=10000).
+    pub filter_ms: u16,
+    /// 14: law, 0 model-based, 1 PI alone.
+    pub law: u16,
+}
+
+impl ControlRegisters {
+    /// The registers of [`ControlSettings::DEFAULT`].
+    pub const DEFAULT: Self = Self {
+        pressure_setpoint: 0,
+        flow_setpoint: 0,
+        torque_min: 0,
+        torque_max: SETPOINT_MAX,
+        rate: 2000,
+        filter_ms: 250,
+        law: 0,
+    };
+
+    /// The settings in the core's units.
+    pub fn settings(&self) -> ControlSettings {
+        ControlSettings {
+            pressure_setpoint_mca: f32::from(self.pressure_setpoint) / 1000.0,
+            flow_setpoint_lps: f32::from(self.flow_setpoint) / 100.0,
+            torque_min_pct: setpoint_pct(self.torque_min),
+            torque_max_pct: setpoint_pct(self.torque_max),
+            rate_pct_per_s: f32::from(self.rate) / 10.0,
+            setpoint_filter_s: f32::from(self.filter_ms) / 1000.0,
+            law: if self.law == 1 {
+                ControlLaw::Pi
+            } else {
+                ControlLaw::Model
+            },
+        }
+    }
+
+    /// The registers are consistent: limits in 0..=10000 with low < high, a rate ≥ 1, a
+    /// filter ≤ 10 s, a known law.
+    pub fn is_valid(&self) -> bool {
+        self.torque_max <= SETPOINT_MAX
+            && self.torque_min < self.torque_max
+            && self.rate >= 1
+            && self.filter_ms <= SETPOINT_FILTER_MAX_MS
+            && self.law <= 1
     }
 }
 
@@ -211,6 +290,10 @@ pub fn input_registers(p: &Published) -> [u16; INPUT_REGISTERS] {
         p.trip_causes,
         0,
         0,
+        f.signed(p.active_setpoint, loop_scale(p.status)),
+        f.signed(p.control_error, loop_scale(p.status)),
+        f.signed(p.feedforward_pct, 100.0),
+        f.signed(p.integral_pct, 100.0),
     ];
     // The wide twins of 14 and 20: a saturated twin still reads the wide value.
     r[24] = signed_register(p.vfd_speed_rpm, 1.0);
@@ -219,14 +302,24 @@ pub fn input_registers(p: &Published) -> [u16; INPUT_REGISTERS] {
     r
 }
 
-/// The published values back from input registers 0..=23, as a SCADA client reads them:
+/// Scale of input registers 26 and 27: 1000 (0.001 mca) unless the loop holds a flow
+/// (status bit 13), 100 (0.01 l/s).
+fn loop_scale(status: u16) -> f32 {
+    if crate::types::Status::from_bits(status).holds_flow {
+        100.0
+    } else {
+        1000.0
+    }
+}
+
+/// The published values back from input registers 0..=23 and 26..=29, as a SCADA client reads them:
 /// each within half its register's step of the value published, a saturated one at its
 /// range's end (status bit 8, not kept here, says so; the wide twins 24 and 25 are not read).
 pub fn published_from_registers(r: &[u16; INPUT_REGISTERS]) -> Published {
     let unsigned = |i: usize, scale: f32| f32::from(r[i]) / scale;
     let signed = |i: usize, scale: f32| f32::from(r[i] as i16) / scale;
     Published {
-        status: r[0] & 0xFF,
+        status: r[0] & STATUS_CORE_BITS,
         torque_pct: unsigned(1, 100.0),
         pressure_mca: signed(2, 1000.0),
         flow_lps: unsigned(3, 100.0),
@@ -250,6 +343,10 @@ pub fn published_from_registers(r: &[u16; INPUT_REGISTERS]) -> Published {
         alarms: r[21],
         observer_flow_sd_lps: unsigned(22, 100.0),
         trip_causes: r[23],
+        active_setpoint: signed(26, loop_scale(r[0])),
+        control_error: signed(27, loop_scale(r[0])),
+        feedforward_pct: signed(28, 100.0),
+        integral_pct: signed(29, 100.0),
     }
 }
 
@@ -273,6 +370,8 @@ pub struct ScadaSlave {
     pub stop_writes: u16,
     /// The protections (holding registers 5..=7).
     pub protection: ProtectionConfig,
+    /// The loops' settings (holding registers 8..=14).
+    pub control: ControlRegisters,
 }
 
 impl ScadaSlave {
@@ -288,6 +387,7 @@ impl ScadaSlave {
             faults: 0,
             stop_writes: 0,
             protection: ProtectionConfig::DEFAULT,
+            control: ControlRegisters::DEFAULT,
         })
     }
 
@@ -308,6 +408,13 @@ impl ScadaSlave {
             self.protection.overspeed_rpm,
             self.protection.trip_on,
             self.protection.no_flow_trip_s,
+            self.control.pressure_setpoint,
+            self.control.flow_setpoint,
+            self.control.torque_min,
+            self.control.torque_max,
+            self.control.rate,
+            self.control.filter_ms,
+            self.control.law,
         ]
     }
 
@@ -321,6 +428,7 @@ impl ScadaSlave {
             faults: injected_faults(self.faults),
             stop_writes: self.stop_writes,
             protection: self.protection,
+            control: self.control.settings(),
         }
     }
 
@@ -354,8 +462,10 @@ impl ScadaSlave {
         )
     }
 
-    /// Applies a write of `values` from `address` on, all or nothing.
-    fn write_words(&mut self, address: u16, values: &[u16]) -> Result<(), Exception> {
+    /// Applies a write of `values` to the holding registers from `address` on, all or
+    /// nothing, as a Modbus FC 16 would (the exception it would answer on refusal): the one
+    /// decode of the holding registers, also used by the plant link's in-band writes.
+    pub fn write_words(&mut self, address: u16, values: &[u16]) -> Result<(), Exception> {
         let start = usize::from(address);
         if !self.holding_exist(start, values.len()) {
             return Err(Exception::IllegalDataAddress);
@@ -379,8 +489,19 @@ impl ScadaSlave {
                 5 if OVERSPEED_RANGE_RPM.contains(&v) => next.protection.overspeed_rpm = v,
                 6 if v & !TRIP_ALL == 0 => next.protection.trip_on = v,
                 7 if NO_FLOW_TRIP_RANGE_S.contains(&v) => next.protection.no_flow_trip_s = v,
+                8 => next.control.pressure_setpoint = v,
+                9 => next.control.flow_setpoint = v,
+                10 if v <= SETPOINT_MAX => next.control.torque_min = v,
+                11 if v <= SETPOINT_MAX => next.control.torque_max = v,
+                12 if v >= 1 => next.control.rate = v,
+                13 if v <= SETPOINT_FILTER_MAX_MS => next.control.filter_ms = v,
+                14 if v <= 1 => next.control.law = v,
                 _ => return Err(Exception::IllegalDataValue),
             }
+        }
+        // The limits as a pair: a write that leaves low ≥ high is refused whole.
+        if !next.control.is_valid() {
+            return Err(Exception::IllegalDataValue);
         }
         *self = next;
         Ok(())
@@ -518,7 +639,7 @@ mod tests {
         assert_eq!(exception(&mut s, &[1, 6, 0, 4, 0, 16]), 3, "fault bit 4");
         ask(&mut s, &frame(&[1, 6, 0, 4, 0, 0b1010])).unwrap();
         assert_eq!(s.faults, 0b1010);
-        assert_eq!(exception(&mut s, &[1, 3, 0, 7, 0, 2]), 2, "past the map");
+        assert_eq!(exception(&mut s, &[1, 3, 0, 14, 0, 2]), 2, "past the map");
     }
 
     #[test]
@@ -620,7 +741,7 @@ mod tests {
             "unknown function"
         );
         assert_eq!(
-            exception(&mut s, &[1, 4, 0, 25, 0, 2]),
+            exception(&mut s, &[1, 4, 0, 29, 0, 2]),
             2,
             "past the input map"
         );
@@ -630,7 +751,7 @@ mod tests {
             "the bench's holding registers on a board"
         );
         assert_eq!(
-            exception(&mut s, &[1, 6, 0, 8, 0, 1]),
+            exception(&mut s, &[1, 6, 0, 15, 0, 1]),
             2,
             "write past the map"
         );
@@ -645,7 +766,26 @@ mod tests {
             3,
             "setpoint 10001"
         );
-        assert_eq!(exception(&mut s, &[1, 6, 0, 1, 0, 3]), 3, "mode 3");
+        assert_eq!(exception(&mut s, &[1, 6, 0, 1, 0, 5]), 3, "mode 5");
+        assert_eq!(
+            exception(&mut s, &[1, 6, 0, 10, 0x27, 0x10]),
+            3,
+            "low limit 100 %"
+        );
+        assert_eq!(exception(&mut s, &[1, 6, 0, 11, 0, 0]), 3, "high limit 0 %");
+        assert_eq!(exception(&mut s, &[1, 6, 0, 12, 0, 0]), 3, "rate 0");
+        assert_eq!(
+            exception(&mut s, &[1, 6, 0, 13, 0x27, 0x11]),
+            3,
+            "filter 10.001 s"
+        );
+        assert_eq!(exception(&mut s, &[1, 6, 0, 14, 0, 2]), 3, "law 2");
+        // The limits as a pair: low and high crossed in one write, refused whole.
+        assert_eq!(
+            exception(&mut s, &[1, 16, 0, 10, 0, 2, 4, 0x13, 0x88, 0x03, 0xE8]),
+            3
+        );
+        assert_eq!(s.control, ControlRegisters::DEFAULT);
         assert_eq!(exception(&mut s, &[1, 6, 0, 2, 0, 2]), 3, "arithmetic 2");
         // Regression (hostile run): an unsupported function is 01 whatever its fields; an
         // oversized quantity in FC 01, 02 or 15 used to answer 03 (rmodbus's own check).
@@ -717,11 +857,19 @@ mod tests {
                 assert_eq!(setpoint_register(setpoint_pct(v)), Some(v), "{v}");
             }
         }
+        let modes = [
+            Mode::Stop,
+            Mode::Manual,
+            Mode::Profile,
+            Mode::Pressure,
+            Mode::Flow,
+        ];
+        assert_eq!(modes.map(mode_register), [0, 1, 2, 3, 4]);
         assert_eq!(
-            [Mode::Stop, Mode::Manual, Mode::Profile].map(mode_register),
-            [0, 1, 2]
+            modes.map(|m| mode_from_register(mode_register(m))),
+            modes.map(Some)
         );
-        assert_eq!(mode_from_register(3), None);
+        assert_eq!(mode_from_register(5), None);
         assert_eq!(
             [Arithmetic::F32, Arithmetic::Q15].map(arithmetic_register),
             [0, 1]
@@ -783,6 +931,10 @@ mod tests {
             alarms: 0x1FF,
             observer_flow_sd_lps: 0.3,
             trip_causes: 0x18,
+            active_setpoint: 3.1234,
+            control_error: -0.0456,
+            feedforward_pct: 41.237,
+            integral_pct: -3.21,
         };
         let r = input_registers(&p);
         assert_eq!(r[0] & 1 << 8, 0, "nothing saturated");
@@ -807,6 +959,10 @@ mod tests {
                 (x.observer_flow_lps, 100.0),
                 (x.observer_valve_k2, 1e5),
                 (x.observer_flow_sd_lps, 100.0),
+                (x.active_setpoint, 1000.0),
+                (x.control_error, 1000.0),
+                (x.feedforward_pct, 100.0),
+                (x.integral_pct, 100.0),
             ]
         };
         for (k, ((a, scale), (b, _))) in fields(&p).into_iter().zip(fields(&q)).enumerate() {

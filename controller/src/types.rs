@@ -14,6 +14,11 @@ pub enum Mode {
     Manual,
     /// The built-in excitation profile (the paper's pulses).
     Profile,
+    /// Pressure control: the loop holds the outlet pressure at
+    /// [`ControlSettings::pressure_setpoint_mca`] ([`crate::regulate`]).
+    Pressure,
+    /// Flow control: the loop holds the flow at [`ControlSettings::flow_setpoint_lps`].
+    Flow,
 }
 
 impl Mode {
@@ -23,7 +28,88 @@ impl Mode {
             Mode::Stop => "stop",
             Mode::Manual => "manual",
             Mode::Profile => "profile",
+            Mode::Pressure => "pressure",
+            Mode::Flow => "flow",
         }
+    }
+
+    /// The mode holds a pressure or a flow in closed loop.
+    pub fn regulates(self) -> bool {
+        matches!(self, Mode::Pressure | Mode::Flow)
+    }
+}
+
+/// The law of the pressure and flow loops ([`crate::regulate`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ControlLaw {
+    /// The default: the white-box model's steady-state inverse at the observer's load as
+    /// feedforward, plus a PI whose gains are scheduled on the model's local gain and time
+    /// constant.
+    #[default]
+    Model,
+    /// A PI alone with one gain set for the whole range, as a drive ships it: the comparison.
+    Pi,
+}
+
+impl ControlLaw {
+    /// Its name: `model`, `pi`.
+    pub fn name(self) -> &'static str {
+        match self {
+            ControlLaw::Model => "model",
+            ControlLaw::Pi => "pi",
+        }
+    }
+
+    /// The law of a name ([`ControlLaw::name`]).
+    pub fn from_name(name: &str) -> Option<Self> {
+        match name {
+            "model" => Some(ControlLaw::Model),
+            "pi" => Some(ControlLaw::Pi),
+            _ => None,
+        }
+    }
+}
+
+/// The pressure and flow loops' settings (SCADA holding registers 8..=14), in the core's
+/// units.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ControlSettings {
+    /// Pressure setpoint of mode 3, mca (0..=65.535).
+    pub pressure_setpoint_mca: f32,
+    /// Flow setpoint of mode 4, l/s (0..=655.35).
+    pub flow_setpoint_lps: f32,
+    /// Lowest torque reference the loops give, % (0..=100, below `torque_max_pct`).
+    pub torque_min_pct: f32,
+    /// Highest torque reference the loops give, % (0..=100).
+    pub torque_max_pct: f32,
+    /// Torque rate limit of the loops and of every mode switch, %/s (0.1..=6 553.5).
+    pub rate_pct_per_s: f32,
+    /// Time constant of the setpoint's first-order reference model, s (0..=10; 0: the
+    /// setpoint goes straight in).
+    pub setpoint_filter_s: f32,
+    /// The loops' law.
+    pub law: ControlLaw,
+}
+
+impl ControlSettings {
+    /// Defaults: setpoints 0, torque 0..=100 %, 200 %/s, a 0.25 s setpoint filter, the
+    /// model-based law.
+    pub const DEFAULT: Self = Self {
+        pressure_setpoint_mca: 0.0,
+        flow_setpoint_lps: 0.0,
+        torque_min_pct: 0.0,
+        torque_max_pct: 100.0,
+        rate_pct_per_s: 200.0,
+        setpoint_filter_s: 0.25,
+        law: ControlLaw::Model,
+    };
+}
+
+impl Default for ControlSettings {
+    fn default() -> Self {
+        Self::DEFAULT
     }
 }
 
@@ -78,10 +164,26 @@ pub struct Status {
     pub vfd_readings_invalid: bool,
     /// Bit 7: tripped: a protection holds the torque at 0 % ([`crate::protect`]).
     pub tripped: bool,
+    /// Bit 9: a pressure or flow loop is in control (mode 3 or 4, running, the link up, a
+    /// measurement to act on).
+    pub in_control: bool,
+    /// Bit 10: the loop's torque is held at a limit (range or rate).
+    pub limited: bool,
+    /// Bit 11: the loop acts on the observer's flow or pressure (its transmitter in fault).
+    pub virtual_measurement: bool,
+    /// Bit 12: the loop lost its measurement and holds the last torque (pressure transmitter
+    /// in fault and the observer's pressure not trustworthy).
+    pub control_held: bool,
+    /// Bit 13: the loop holds a flow (mode 4): input registers 26 and 27 are in 0.01 l/s,
+    /// else in 0.001 mca.
+    pub holds_flow: bool,
 }
 
+/// Status bits the core owns ([`Status::bits`]); bit 8 is the register map's (saturated).
+pub const STATUS_CORE_BITS: u16 = 0x3EFF;
+
 impl Status {
-    /// The word: flag k in bit k (0..=7); bits 8..=15 are 0.
+    /// The word: flag k in bit k (0..=7 and 9..=13, [`STATUS_CORE_BITS`]); the others are 0.
     pub fn bits(&self) -> u16 {
         // Shifts written out: the fold over an array was a call of ≈ 68 instructions in
         // every 1 ms step on the M4.
@@ -93,6 +195,11 @@ impl Status {
             | u16::from(self.flow_fault) << 5
             | u16::from(self.vfd_readings_invalid) << 6
             | u16::from(self.tripped) << 7
+            | u16::from(self.in_control) << 9
+            | u16::from(self.limited) << 10
+            | u16::from(self.virtual_measurement) << 11
+            | u16::from(self.control_held) << 12
+            | u16::from(self.holds_flow) << 13
     }
 
     /// The bits back as flags (bits this struct has no flag for are ignored).
@@ -107,6 +214,11 @@ impl Status {
             flow_fault: b(5),
             vfd_readings_invalid: b(6),
             tripped: b(7),
+            in_control: b(9),
+            limited: b(10),
+            virtual_measurement: b(11),
+            control_held: b(12),
+            holds_flow: b(13),
         }
     }
 }
@@ -203,6 +315,15 @@ pub struct Published {
     pub observer_flow_sd_lps: f32,
     /// The alarm bits that tripped the controller (0: not tripped).
     pub trip_causes: u16,
+    /// The loop's active setpoint (the reference model's output), mca in mode 3, l/s in mode
+    /// 4; 0 in the other modes.
+    pub active_setpoint: f32,
+    /// The loop's control error (active setpoint − measured), as `active_setpoint`.
+    pub control_error: f32,
+    /// The loop's feedforward part, %.
+    pub feedforward_pct: f32,
+    /// The loop's integral part, %.
+    pub integral_pct: f32,
 }
 
 #[cfg(test)]
@@ -213,7 +334,7 @@ mod tests {
     fn status_bits_round_trip_each_flag_in_its_bit() {
         for bits in 0..=u16::MAX {
             let s = Status::from_bits(bits);
-            assert_eq!(s.bits(), bits & 0xFF, "{bits:#x}");
+            assert_eq!(s.bits(), bits & STATUS_CORE_BITS, "{bits:#x}");
             assert_eq!(Status::from_bits(s.bits()), s);
         }
         let one = Status {
@@ -247,7 +368,7 @@ mod tests {
         use core::mem::size_of;
         assert_eq!(
             size_of::<Published>(),
-            18 * size_of::<f32>() + 6 * size_of::<u16>()
+            22 * size_of::<f32>() + 6 * size_of::<u16>()
         );
     }
 }

@@ -121,6 +121,127 @@ pub fn steady_torque<T: Real>(
     })
 }
 
+/// [`steady_torque`] warm-started from a nearby solution `near` (the last control period's,
+/// or any operating point: a speed ≤ 0 starts from the nominal 1 750 rpm): Newton's method on
+/// the speed (step 2) and on the reference (step 4), a few iterations where the scan takes a
+/// few hundred evaluations, so a loop can run it every period on the MCU. A torque beyond
+/// what 0..=100 % gives is answered at the limit, flagged, as [`steady_torque`] does. Falls
+/// back to [`steady_torque`] whenever Newton cannot settle on the rising branch inside the
+/// ranges (a slope ≤ 0, a speed beyond [`STEADY_SEARCH_MAX_RPM`], no convergence in
+/// [`NEWTON_ITERATIONS`]), so the answer is [`steady_torque`]'s to within its tolerance.
+pub fn steady_torque_near<T: Real>(
+    p: &BenchParams<T>,
+    load: Load<T>,
+    target: Target<T>,
+    near: &SteadyInverse<T>,
+) -> Result<SteadyInverse<T>, BenchError> {
+    newton(p, load, target, near).map_or_else(|| steady_torque(p, load, target), Ok)
+}
+
+/// Most Newton iterations of [`steady_torque_near`] per unknown.
+pub const NEWTON_ITERATIONS: usize = 8;
+
+/// Where [`steady_torque_near`] starts without a solution to start from, rpm (the paper's
+/// nominal speed).
+const NEWTON_START_RPM: f64 = 1750.0;
+
+fn newton<T: Real>(
+    p: &BenchParams<T>,
+    load: Load<T>,
+    target: Target<T>,
+    near: &SteadyInverse<T>,
+) -> Option<SteadyInverse<T>> {
+    let positive = |x: T| x.is_finite() && x > T::ZERO;
+    if !(positive(load.valve_k2) && positive(load.head_scale) && positive(load.torque_scale)) {
+        return None;
+    }
+    let c = p.static_head_c_mca;
+    let (flow, pressure) = match target {
+        Target::PressureMca(h) if h.is_finite() => (valve_flow_lps(load.valve_k2, c, h), h),
+        Target::FlowLps(q) if q.is_finite() && q >= T::ZERO => {
+            (q, valve_pressure_mca(load.valve_k2, c, q))
+        }
+        _ => return None,
+    };
+    if !positive(flow) {
+        return None;
+    }
+    let head = (system_k(p.pipe_k1, load.valve_k2) * flow * flow - c) / load.head_scale;
+    // Tolerances: 1e-5 of the value's scale, well under what a transmitter resolves (one
+    // ADC code is 3.4 mm of water) and above f32's rounding of the sums.
+    let tol = T::from_f64(1e-5);
+    let max_rpm = T::from_f64(STEADY_SEARCH_MAX_RPM);
+    let mut w = if positive(near.speed_rpm) && near.speed_rpm < max_rpm {
+        near.speed_rpm
+    } else {
+        T::from_f64(NEWTON_START_RPM)
+    };
+    let mut done = false;
+    for _ in 0..NEWTON_ITERATIONS {
+        let h = pump_head_partials(&p.alpha, w, flow);
+        let g = h.value - head;
+        if !(h.d_speed > T::ZERO) {
+            return None;
+        }
+        w = w - g / h.d_speed;
+        if !(w > T::ZERO && w < max_rpm) {
+            return None;
+        }
+        if g.abs() <= tol * (T::ONE + head.abs()) {
+            done = true;
+            break;
+        }
+    }
+    if !done {
+        return None;
+    }
+    let torque = scaled_load_torque_pct(&p.beta, load.torque_scale, w, flow);
+    let full = T::from_f64(MAX_TORQUE_PCT);
+    let gm = &p.gamma;
+    let at = |u: T, limited: bool| SteadyInverse {
+        torque_ref_pct: u,
+        speed_rpm: w,
+        flow_lps: flow,
+        pressure_mca: pressure,
+        limited,
+    };
+    // Te(u) rises over 0..=100 % (eq. 4 on the paper's bench): the ends answer a torque
+    // beyond them, as the scan's `Root::Above` does.
+    if electromagnetic_torque_pct(gm, full) < torque {
+        return Some(at(full, true));
+    }
+    if !(electromagnetic_torque_pct(gm, T::ZERO) < torque) {
+        return None;
+    }
+    let (five, four, three, two) = (
+        T::from_f64(5.0),
+        T::from_f64(4.0),
+        T::from_f64(3.0),
+        T::from_f64(2.0),
+    );
+    let mut u = if near.torque_ref_pct > T::ZERO && near.torque_ref_pct < full {
+        near.torque_ref_pct
+    } else {
+        full / two
+    };
+    for _ in 0..NEWTON_ITERATIONS {
+        let g = electromagnetic_torque_pct(gm, u) - torque;
+        let slope =
+            (((five * gm[0] * u + four * gm[1]) * u + three * gm[2]) * u + two * gm[3]) * u + gm[4];
+        if !(slope > T::ZERO) {
+            return None;
+        }
+        u = u - g / slope;
+        if !(u > T::ZERO && u < full) {
+            return None;
+        }
+        if g.abs() <= tol * (T::ONE + torque.abs()) {
+            return Some(at(u, false));
+        }
+    }
+    None
+}
+
 /// The bench linearised about a steady state: what a controller's gains are scheduled on.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Linearisation<T> {
@@ -400,5 +521,73 @@ mod tests {
                 "{load:?}"
             );
         }
+    }
+
+    /// The warm-started inverse agrees with the scan within its tolerance, from a start a
+    /// control period's change away, and falls back where Newton cannot start.
+    #[test]
+    fn newton_from_a_nearby_solution_is_the_scan() {
+        let p = BenchParams::<f32>::PAPER;
+        for (k2f, s_h, s_t) in [
+            (1.0f32, 1.0f32, 1.0f32),
+            (0.7, 1.05, 0.95),
+            (1.3, 0.95, 1.05),
+        ] {
+            let load = Load {
+                valve_k2: p.valve_k2 * k2f,
+                head_scale: s_h,
+                torque_scale: s_t,
+            };
+            for (a, b) in [
+                (Target::PressureMca(2.0f32), Target::PressureMca(2.05f32)),
+                (Target::PressureMca(4.0), Target::PressureMca(3.9)),
+                (Target::PressureMca(1.0), Target::PressureMca(3.0)),
+                (Target::FlowLps(10.0), Target::FlowLps(10.3)),
+                (Target::FlowLps(15.0), Target::FlowLps(8.0)),
+            ] {
+                let near = steady_torque(&p, load, a).unwrap();
+                let scan = steady_torque(&p, load, b).unwrap();
+                let fast = steady_torque_near(&p, load, b, &near).unwrap();
+                if scan.speed_rpm > 0.0 {
+                    assert!(
+                        newton(&p, load, b, &near).is_some(),
+                        "Newton itself settles: {a:?} -> {b:?}, valve x{k2f}"
+                    );
+                }
+                assert_eq!(fast.limited, scan.limited);
+                let du = (fast.torque_ref_pct - scan.torque_ref_pct).abs();
+                let dw = (fast.speed_rpm - scan.speed_rpm).abs();
+                assert!(
+                    du < 2e-3 && dw < 0.05,
+                    "{a:?}->{b:?} {k2f}: {fast:?} vs {scan:?}"
+                );
+            }
+        }
+        // From rest (no speed to start at: the nominal one), to rest, a bad target.
+        let load = Load {
+            valve_k2: p.valve_k2,
+            head_scale: 1.0,
+            torque_scale: 1.0,
+        };
+        let rest = SteadyInverse {
+            torque_ref_pct: 0.0,
+            speed_rpm: 0.0,
+            flow_lps: 0.0,
+            pressure_mca: 0.0,
+            limited: false,
+        };
+        let b = Target::PressureMca(3.0);
+        assert!(newton(&p, load, b, &rest).is_some());
+        let (fast, scan) = (
+            steady_torque_near(&p, load, b, &rest).unwrap(),
+            steady_torque(&p, load, b).unwrap(),
+        );
+        assert!((fast.torque_ref_pct - scan.torque_ref_pct).abs() < 2e-3);
+        let low = Target::PressureMca(-20.0);
+        assert_eq!(
+            steady_torque_near(&p, load, low, &scan),
+            steady_torque(&p, load, low)
+        );
+        assert!(steady_torque_near(&p, load, Target::FlowLps(f32::NAN), &rest).is_err());
     }
 }
