@@ -620,8 +620,10 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
                 self.regulator = None;
             }
         }
-        self.virtual_measurement = false;
-        self.control_held = false;
+        if !mode.regulates() {
+            self.virtual_measurement = false;
+            self.control_held = false;
+        }
         let wanted = match mode {
             Mode::Stop => {
                 self.profile = None;
@@ -648,10 +650,23 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             self.transfer = false;
             return 0.0;
         }
+        let s = &c.control;
+        if mode.regulates() {
+            // The loop's torque changes once a period; the output moves toward it at the rate
+            // limit every ms (a ramp, not a 1 % step every 5 ms), within the limits at once.
+            let step = s.rate_pct_per_s * TICK_MS as f32 * 1e-3;
+            let from = self.last_requested_pct;
+            self.transfer = false;
+            return wanted
+                .max(from - step)
+                .min(from + step)
+                .max(s.torque_min_pct)
+                .min(s.torque_max_pct);
+        }
         if !self.transfer {
             return wanted;
         }
-        let step = c.control.rate_pct_per_s * TICK_MS as f32 * 1e-3;
+        let step = s.rate_pct_per_s * TICK_MS as f32 * 1e-3;
         let from = self.last_applied_pct;
         let moved = wanted.max(from - step).min(from + step);
         if moved == wanted {
@@ -668,6 +683,14 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
         inp: &Inputs,
         readings: Option<(Option<f32>, Option<f32>)>,
     ) -> f32 {
+        if inp.vfd.link_alarm {
+            // Nothing delivered: 0 % applied and asked (so the drive gets no old reference
+            // when the link returns), the loop frozen until then, restarted from 0 % after.
+            if let Some(r) = self.regulator.as_mut() {
+                r.hold();
+            }
+            return 0.0;
+        }
         let Some((pressure, flow)) = readings else {
             return self
                 .regulator
@@ -694,8 +717,8 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
                 (Controlled::Pressure, s.pressure_setpoint_mca, measured)
             }
         };
-        if inp.vfd.link_alarm || self.control_held {
-            // Nothing delivered (0 % applied), or nothing to act on: frozen.
+        if self.control_held {
+            // Nothing to act on: the last torque, the loop frozen.
             return self
                 .regulator
                 .as_mut()

@@ -2,47 +2,14 @@
 //! The 1 ms loop on the virtual bench, on the host: operating point, VFD link alarm,
 //! transmitter faults, the profile, the arithmetic switch and the SCADA registers.
 
-use controller::control::{Config, LogLine, NarmaxModel};
+mod common;
+
+use common::{input, run, setup, with_crc, write_holding, Board};
 use controller::link::VfdPort;
-use controller::modbus::{crc16, Frame};
+use controller::modbus::Frame;
 use controller::types::{Arithmetic, Mode, Status};
-use controller::virtual_bench::{VirtualBenchConfig, VirtualBoard, VirtualIo};
+use controller::virtual_bench::VirtualIo;
 use model_core::WhiteBox;
-
-use pump_models::{flow as flow_model, pressure as pressure_model};
-
-type Board = VirtualBoard<
-    { pressure_model::FRAMES },
-    { pressure_model::HIDDEN },
-    { flow_model::FRAMES },
-    { flow_model::HIDDEN },
->;
-
-fn setup(mode: Mode, setpoint_pct: f32) -> Board {
-    let cfg = Config {
-        initial_mode: mode,
-        initial_setpoint_pct: setpoint_pct,
-        virtual_bench: true,
-        ..Config::bench()
-    };
-    let p = NarmaxModel::new(&pressure_model::F32, &pressure_model::Q15, 50).unwrap();
-    let q = NarmaxModel::new(&flow_model::F32, &flow_model::Q15, 100).unwrap();
-    Board::new(&cfg, p, q, VirtualBenchConfig::default_offsets(7)).unwrap()
-}
-
-fn run(b: &mut Board, ms: u32) -> Vec<LogLine> {
-    let mut logs = vec![];
-    for _ in 0..ms {
-        logs.extend(b.tick().unwrap().log);
-    }
-    logs
-}
-
-fn with_crc(body: &[u8]) -> Vec<u8> {
-    let mut f = body.to_vec();
-    f.extend_from_slice(&crc16(body).to_le_bytes());
-    f
-}
 
 fn read_inputs(b: &mut Board) -> Vec<u16> {
     let mut r = Frame::new();
@@ -295,14 +262,6 @@ fn a_drive_that_takes_no_writes_forces_zero_and_one_that_gives_no_reads_is_flagg
     assert!(regs[14] != 0 && regs[16] != 0, "readings back");
 }
 
-fn write_holding(b: &mut Board, register: u8, value: u16) {
-    let [hi, lo] = value.to_be_bytes();
-    let mut r = Frame::new();
-    let req = with_crc(&[1, 6, 0, register, hi, lo]);
-    let n = b.scada.handle(&req, &mut r).expect("an answer");
-    assert_eq!(&r[..n], &req[..], "write of holding {register} echoed");
-}
-
 fn read_observer(b: &mut Board) -> (f32, f32, f32, u16) {
     let mut r = Frame::new();
     let n = b
@@ -398,17 +357,6 @@ fn no_alarm_from_rest_through_a_minute_of_pulses() {
 
 // ---- Protection that acts (controller::protect) ----
 
-/// One input register.
-fn input(b: &mut Board, register: u8) -> u16 {
-    let mut r = Frame::new();
-    let n = b
-        .scada
-        .handle(&with_crc(&[1, 4, 0, register, 0, 1]), &mut r)
-        .unwrap();
-    assert_eq!(n, 7);
-    u16::from_be_bytes([r[3], r[4]])
-}
-
 const TRIPPED: u16 = 1 << 7;
 
 /// Runs until `done` holds, at most `limit_ms`; the ms it took.
@@ -471,7 +419,11 @@ fn a_dry_run_trips_to_zero_and_restarts_only_when_acknowledged_and_commanded() {
         "no restart without a mode write"
     );
     write_holding(&mut b, 1, 1);
+    // A mode switch moves the torque at the rate limit (200 %/s, holding register 12): no
+    // step; 50 % after 250 ms.
     run(&mut b, 100);
+    assert!((b.io.torque_ref_pct() - 20.0).abs() < 0.01, "ramping");
+    run(&mut b, 150);
     assert_eq!(b.io.torque_ref_pct(), 50.0, "running again");
     run(&mut b, 10_000);
     assert_eq!(
@@ -523,7 +475,7 @@ fn a_trip_whose_cause_stands_cannot_be_acknowledged_and_nothing_restarts_by_itse
     write_holding(&mut b, 1, 0);
     run(&mut b, 100);
     write_holding(&mut b, 1, 1);
-    run(&mut b, 100);
+    run(&mut b, 250);
     assert_eq!(
         b.io.torque_ref_pct(),
         50.0,
@@ -737,14 +689,7 @@ fn no_trip_in_30_minutes_of_pulses() {
         ..VirtualBenchConfig::default_offsets(99)
     };
     for bench in [VirtualBenchConfig::default_offsets(21), other] {
-        let cfg = Config {
-            initial_mode: Mode::Profile,
-            virtual_bench: true,
-            ..Config::bench()
-        };
-        let p = NarmaxModel::new(&pressure_model::F32, &pressure_model::Q15, 50).unwrap();
-        let q = NarmaxModel::new(&flow_model::F32, &flow_model::Q15, 100).unwrap();
-        let mut b = Board::new(&cfg, p, q, bench).unwrap();
+        let mut b = common::setup_with(Mode::Profile, 0.0, bench);
         let mut top: f32 = 0.0;
         run(&mut b, 1000);
         for s in 1..1800 {
