@@ -18,6 +18,7 @@
 #![no_main]
 
 use controller::control::{Config, NarmaxModel};
+use controller::modbus::{crc16, Frame};
 use controller::types::Mode;
 use controller::virtual_bench::{VirtualBenchConfig, VirtualBoard};
 use core::fmt::Write;
@@ -105,6 +106,12 @@ const ROWS: &[Row] = &[
     Row::new("monitor_update", 400, monitor_update),
     // The controller's whole 1 ms tick on the virtual bench, profile mode, 20 s.
     Row::new("tick_mean", 20_000, tick).with_max("tick_max"),
+    // The pressure loop's period (mode 3, model-based: the warm-started inverse twice, the
+    // linearisation, the PI) on the white-box, pressure steps 2 → 4 → 1 → 3 mca, 5 s each.
+    Row::new("regulator_step", 4000, regulator_step).with_max("regulator_step_max"),
+    // The whole tick in mode 3 on the virtual bench, the same steps, 20 s: held to the
+    // tick's budgets (tick_mean, tick_max).
+    Row::new("tick_pressure_mean", 20_000, tick_pressure).with_max("tick_pressure_max"),
 ];
 
 /// Seed of the excitation every row follows.
@@ -341,8 +348,62 @@ const FLOW_MS: u32 = build_period_ms(models::flow::SAMPLE_PERIOD_S);
 /// firmware runs it. The inputs (ADC codes, commands, VFD status) are made outside the timed
 /// call, and the links and the bench's 1 ms step run between calls, untimed.
 fn tick(c: &mut Cost, n: u32) -> Result<(), Error> {
+    tick_in(Mode::Profile, c, n)
+}
+
+/// [`tick`] in mode 3 (pressure control), the setpoint stepping 2 → 4 → 1 → 3 mca every 5 s
+/// (the SCADA's holding register, as a user writes it).
+fn tick_pressure(c: &mut Cost, n: u32) -> Result<(), Error> {
+    tick_in(Mode::Pressure, c, n)
+}
+
+/// Pressure setpoints of the loop rows, mca, each for [`LOOP_STEP_MS`].
+const LOOP_SETPOINTS_MCA: [f32; 4] = [2.0, 4.0, 1.0, 3.0];
+/// How long each loop setpoint holds, ms.
+const LOOP_STEP_MS: u32 = 5000;
+
+fn regulator_step(c: &mut Cost, n: u32) -> Result<(), Error> {
+    use controller::regulate::{Controlled, Regulator, CONTROL_PERIOD_MS};
+    use controller::types::ControlSettings;
+    use model_core::inverse::Load;
+    let bench = WhiteBox::<f32>::paper();
+    let p = *bench.params();
+    let load = Load {
+        valve_k2: p.valve_k2,
+        head_scale: 1.0,
+        torque_scale: 1.0,
+    };
+    let mut st = bench.steady_state(40.0).map_err(|_| "steady state")?;
+    let mut reg = Regulator::new(
+        Controlled::Pressure,
+        bench.signals(&st).pressure_mca,
+        40.0,
+        st.speed_rpm,
+    );
+    let s = ControlSettings::DEFAULT;
+    let per_step = LOOP_STEP_MS / CONTROL_PERIOD_MS;
+    for k in 0..n {
+        let sp = LOOP_SETPOINTS_MCA[((k / per_step) % 4) as usize];
+        let y = bench.signals(&st).pressure_mca;
+        let o = c.time(|| {
+            reg.step(
+                black_box(&p),
+                black_box(load),
+                &s,
+                black_box(sp),
+                black_box(y),
+            )
+        });
+        for _ in 0..CONTROL_PERIOD_MS {
+            rk4_ms(&bench, &mut st, o.torque_pct)?;
+        }
+    }
+    Ok(())
+}
+
+fn tick_in(mode: Mode, c: &mut Cost, n: u32) -> Result<(), Error> {
     let config = Config {
-        initial_mode: Mode::Profile,
+        initial_mode: mode,
         profile_seed: SEED,
         virtual_bench: true,
         ..Config::bench()
@@ -353,7 +414,18 @@ fn tick(c: &mut Cost, n: u32) -> Result<(), Error> {
         .map_err(|_| "flow model")?;
     let mut b = VirtualBoard::new(&config, p, q, VirtualBenchConfig::default_offsets(SEED))
         .map_err(|_| "controller refused its configuration")?;
-    for _ in 0..n {
+    for k in 0..n {
+        if k % LOOP_STEP_MS == 0 {
+            let sp = LOOP_SETPOINTS_MCA[((k / LOOP_STEP_MS) % 4) as usize];
+            // FC 06 to holding register 8 (0.001 mca), as a SCADA writes it.
+            let [hi, lo] = ((sp * 1000.0) as u16).to_be_bytes();
+            let body = [1, 6, 0, 8, hi, lo];
+            let [c0, c1] = crc16(&body).to_le_bytes();
+            let request = [1, 6, 0, 8, hi, lo, c0, c1];
+            b.scada
+                .handle(&request, &mut Frame::new())
+                .ok_or("setpoint refused")?;
+        }
         b.tick_with(|controller, inputs| c.time(|| controller.step(black_box(inputs))))
             .map_err(|_| "virtual bench step failed")?;
     }
