@@ -140,6 +140,12 @@ impl Lockstep {
         &self.scada
     }
 
+    /// The holding registers, for a SCADA server that serves them between frames (the QEMU
+    /// board's Modbus link in plant mode: its writes land when they arrive, not in lockstep).
+    pub fn scada_mut(&mut self) -> &mut ScadaSlave {
+        &mut self.scada
+    }
+
     /// A write of `values` to the holding registers from `address` on, all or nothing (the
     /// Modbus exception a SCADA write would get on refusal).
     pub fn write(&mut self, address: u16, values: &[u16]) -> Result<(), Exception> {
