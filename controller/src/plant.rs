@@ -69,24 +69,27 @@
 //! > W 1 3
 //! < K
 //! > S 745 745 0 0
-//! < T 4 0.8 513
+//! < T 4 0.029346498 525
 //! > S 745 745 12.5 0.8
-//! < T 9 1.6 513
+//! < T 9 1.0293466 1549
 //! > W 3 1000
 //! < E 2
 //! > S 4095 745 -
-//! < T 14 0 6
+//! < T 14 0 1111
 //! > S 1 2 3
 //! < E fields
 //! > Q
 //! < B
 //! ```
 //!
-//! (Torques and status words here show the format only.) Lockstep makes a run deterministic:
-//! the same frames and writes give the same replies, bit for bit, on the host and on the
-//! QEMU board, whatever either machine's speed. On the board a SCADA master may still read
-//! and write over Modbus; its writes land between two frames, when they arrive, so only the
-//! in-band `W` lines are deterministic.
+//! (`cargo xtask plant-stdio` answered these. Status 525: bits 0 running, 2 model
+//! extrapolating, 3 VFD link ok, 9 in control; 1549 adds 10, limited; 1111: bits 0, 1 any
+//! alarm, 2, 4 pressure transmitter in fault (22 mA), 6 VFD readings invalid, 10, and not 3:
+//! the link is down.) Lockstep makes a run deterministic: the same frames and writes give
+//! the same replies, bit for bit, on the host and on the QEMU board, whatever either
+//! machine's speed. On the board a SCADA master may still read and write over Modbus; its
+//! writes land between two frames, when they arrive, so only the in-band `W` lines are
+//! deterministic.
 
 use crate::control::{Controller, Inputs, Outputs, VfdStatus};
 use crate::modbus::Exception;

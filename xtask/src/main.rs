@@ -15,6 +15,11 @@
 //! - `replay`, `e2e`, `flood`: one part of `test` alone (the on-target checks and the QEMU
 //!   runs against the host replay; the end-to-end test; the flood).
 //!
+//! - `plant-check`: the plant protocol ([`plant_session`]): a scenario plant against the host's
+//!   session and the QEMU board in plant mode, every reply identical bit for bit, and
+//!   `examples/plant.py` against both (part of `test`); `plant-stdio`: the controller's side
+//!   of the protocol on standard input and output, for a plant that runs it as its child.
+//!
 //! Needs `qemu-system-arm` and `mbpoll` on the PATH (Debian packages of the same names).
 //!
 //! This file only dispatches. The tasks: [`qemu_task`], [`bench`](mod@bench), [`ci`] (`test`),

@@ -282,14 +282,27 @@ impl<E: Endpoint> Exchanges<'_, E> {
     }
 }
 
-/// QEMU running the plant-mode image with USART2 on a pseudo-terminal of its own: the
-/// process (killed when dropped), the pty's path and QEMU's output lines (its own and the
-/// firmware's decoded log), once the firmware has started.
-pub fn start_plant_qemu(elf: &Path) -> Result<(Qemu, String, Receiver<String>)> {
+/// QEMU running the plant-mode image, USART1 (SCADA) on the QEMU serial back-end `scada`
+/// (`null`, `pty`) and USART2 (the plant line) on `plant` (`pty`: a pseudo-terminal of
+/// QEMU's; else a serial device's path), once the firmware has started: the process (killed
+/// when dropped), the plant's pty path if QEMU made one, and QEMU's output lines (its own
+/// and the firmware's decoded log; also printed if `echo`).
+pub fn start_plant_qemu(
+    elf: &Path,
+    scada: &str,
+    plant: &str,
+    echo: bool,
+) -> Result<(Qemu, Option<String>, Receiver<String>)> {
     let mut cmd = qemu_command(elf, &[]);
     cmd.args(["-display", "none", "-monitor", "none"])
-        .args(["-serial", "null", "-serial", "pty"])
-        .stdin(Stdio::null())
+        .args(["-serial", scada, "-serial"]);
+    if plant == "pty" {
+        cmd.arg("pty");
+    } else {
+        // QEMU takes a host serial device by its /dev path: resolve links (socat's).
+        cmd.arg(std::fs::canonicalize(plant).map_err(|e| format!("plant line {plant}: {e}"))?);
+    }
+    cmd.stdin(Stdio::null())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped());
     let mut child = cmd
@@ -302,6 +315,9 @@ pub fn start_plant_qemu(elf: &Path) -> Result<(Qemu, String, Receiver<String>)> 
     let tx2 = tx.clone();
     std::thread::spawn(move || {
         for line in BufReader::new(stderr).lines().map_while(|l| l.ok()) {
+            if echo {
+                eprintln!("{line}");
+            }
             let _ = tx.send(line);
         }
     });
@@ -319,13 +335,16 @@ pub fn start_plant_qemu(elf: &Path) -> Result<(Qemu, String, Receiver<String>)> 
                 lines.extend(decoder.feed(&frames).unwrap_or_default());
             }
             for line in lines {
+                if echo {
+                    println!("{line}");
+                }
                 let _ = tx2.send(line);
             }
         }
     });
     let deadline = Instant::now() + Duration::from_secs(20);
     let (mut pty, mut started) = (None, false);
-    while pty.is_none() || !started {
+    while (plant == "pty" && pty.is_none()) || !started {
         let left = deadline.saturating_duration_since(Instant::now());
         let line = rx
             .recv_timeout(left)
@@ -335,12 +354,12 @@ pub fn start_plant_qemu(elf: &Path) -> Result<(Qemu, String, Receiver<String>)> 
         }
         started |= line.starts_with("firmware:");
     }
-    Ok((qemu, pty.ok_or("no pty")?, rx))
+    Ok((qemu, pty, rx))
 }
 
 /// Waits for QEMU to end (the firmware exits after `Q`); its `done:` line, or an error
 /// with what it logged.
-fn qemu_done(mut qemu: Qemu, log: &Receiver<String>) -> Result<String> {
+pub fn qemu_done(mut qemu: Qemu, log: &Receiver<String>) -> Result<String> {
     let deadline = Instant::now() + Duration::from_secs(10);
     let mut lines = vec![];
     loop {
@@ -399,7 +418,8 @@ pub fn plant_check() -> Result {
     eprintln!("==> plant protocol: the scenario plant against the host and the QEMU board");
     let (host, host_p) = scenario(&mut HostEndpoint::new()?)?;
     let t0 = Instant::now();
-    let (qemu, pty, log) = start_plant_qemu(&elf)?;
+    let (qemu, pty, log) = start_plant_qemu(&elf, "null", "pty", false)?;
+    let pty = pty.ok_or("no plant pty")?;
     let (board, board_p) = scenario(&mut SerialEndpoint::open(&pty)?)?;
     let done = qemu_done(qemu, &log)?;
     let board_s = t0.elapsed().as_secs_f64();
@@ -420,8 +440,8 @@ pub fn plant_check() -> Result {
     let me = std::env::current_exe().map_err(|e| format!("xtask's path: {e}"))?;
     let me = me.to_string_lossy();
     let on_host = python_plant(&["--", &me, "plant-stdio"])?;
-    let (qemu, pty, log) = start_plant_qemu(&elf)?;
-    let on_board = python_plant(&[&pty])?;
+    let (qemu, pty, log) = start_plant_qemu(&elf, "null", "pty", false)?;
+    let on_board = python_plant(&[&pty.ok_or("no plant pty")?])?;
     qemu_done(qemu, &log)?;
     eprintln!("    host: {on_host}\n    QEMU: {on_board}");
     if on_host != on_board {
