@@ -91,7 +91,8 @@
 //! writes land between two frames, when they arrive, so only the in-band `W` lines are
 //! deterministic.
 
-use crate::control::{Controller, Inputs, Outputs, VfdStatus};
+use crate::control::{Config, Controller, Error, Inputs, Outputs, VfdStatus};
+use crate::link::ScadaLink;
 use crate::modbus::Exception;
 use crate::regulate::CONTROL_PERIOD_MS;
 use crate::scada::ScadaSlave;
@@ -99,6 +100,12 @@ use crate::vfd::VfdReadings;
 
 /// One frame per this many 1 ms steps: the control period.
 pub const FRAME_PERIOD_MS: u32 = CONTROL_PERIOD_MS;
+
+/// The controller's configuration in a plant session, on the host and the QEMU board alike
+/// (`board_common::plant_session` builds both sides from it): the bench's ([`Config::bench`]:
+/// its transmitters and drive map, SCADA unit 1, stopped, NARMAX in f32), no virtual bench
+/// (holding registers 3 and 4 do not exist: `W 3 …` answers `E 2`).
+pub const PLANT_CONFIG: Config = Config::bench();
 
 /// What the plant shows the controller for one period.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -136,6 +143,12 @@ impl Lockstep {
             scada,
             vfd: VfdStatus::START,
         }
+    }
+
+    /// A lockstep with the holding registers as a board starts them with `config`
+    /// ([`ScadaLink::new`]: its start-up mode, setpoint and arithmetic, its protections).
+    pub fn for_config(config: &Config) -> Result<Self, Error> {
+        Ok(Self::new(*ScadaLink::new(config)?.slave()))
     }
 
     /// The holding registers now.

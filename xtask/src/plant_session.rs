@@ -9,12 +9,12 @@
 //!   `examples/plant.py` against both.
 
 use crate::board::ensure_flip_link;
-use crate::qemu::{announced_pty, qemu_command, Qemu, Serial, StdoutSplit};
+use crate::qemu::{announced_pty, qemu_command, spawn_with_lines, Qemu, Serial};
 use crate::util::{cargo, root, run, target_dir, Result, TARGET};
 use controller::plant::{PlantFrame, PlantSession, Reply, Request, Served};
 use controller::vfd::VfdReadings;
 use controller::virtual_bench::{VirtualBench, VirtualBenchConfig};
-use std::io::{BufRead, BufReader, Read, Write};
+use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::sync::mpsc::Receiver;
@@ -302,46 +302,7 @@ pub fn start_plant_qemu(
         // QEMU takes a host serial device by its /dev path: resolve links (socat's).
         cmd.arg(std::fs::canonicalize(plant).map_err(|e| format!("plant line {plant}: {e}"))?);
     }
-    cmd.stdin(Stdio::null())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped());
-    let mut child = cmd
-        .spawn()
-        .map_err(|e| format!("cannot start qemu-system-arm: {e}"))?;
-    let stderr = child.stderr.take().ok_or("no stderr")?;
-    let stdout = child.stdout.take().ok_or("no stdout")?;
-    let qemu = Qemu(child);
-    let (tx, rx) = std::sync::mpsc::channel();
-    let tx2 = tx.clone();
-    std::thread::spawn(move || {
-        for line in BufReader::new(stderr).lines().map_while(|l| l.ok()) {
-            if echo {
-                eprintln!("{line}");
-            }
-            let _ = tx.send(line);
-        }
-    });
-    let mut decoder = crate::defmt_log::LogDecoder::new(elf)?;
-    std::thread::spawn(move || {
-        let mut stdout = stdout;
-        let mut split = StdoutSplit::default();
-        let mut buf = [0u8; 4096];
-        while let Ok(n) = stdout.read(&mut buf) {
-            if n == 0 {
-                break;
-            }
-            let (mut lines, frames) = split.feed(&buf[..n]);
-            if !frames.is_empty() {
-                lines.extend(decoder.feed(&frames).unwrap_or_default());
-            }
-            for line in lines {
-                if echo {
-                    println!("{line}");
-                }
-                let _ = tx2.send(line);
-            }
-        }
-    });
+    let (qemu, rx) = spawn_with_lines(elf, cmd, echo)?;
     let deadline = Instant::now() + Duration::from_secs(20);
     let (mut pty, mut started) = (None, false);
     while (plant == "pty" && pty.is_none()) || !started {

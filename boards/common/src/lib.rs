@@ -123,18 +123,15 @@ pub fn build_controller(config: &Config) -> Result<Controller, Error> {
 }
 
 /// The configuration of plant mode (`cargo xtask qemu --plant`, `pumpbench control
-/// --plant-stdio`): the bench's ([`Config::bench`]: its transmitters and drive map, SCADA
-/// unit 1, stopped, NARMAX in f32, no virtual bench: holding registers 3 and 4 do not exist).
-/// The host and the board build their plant sessions from it ([`plant_session`]).
-pub const PLANT_CONFIG: Config = Config::bench();
+/// --plant-stdio`), the protocol's own.
+pub use controller::plant::PLANT_CONFIG;
 
 /// The controller and the plant session of plant mode, from [`PLANT_CONFIG`]: the same on
 /// the host and the board, so that the same frames give the same replies bit for bit (the
 /// protocol: [`controller::plant`]).
 pub fn plant_session() -> Result<(Controller, controller::plant::PlantSession), Error> {
     let core = build_controller(&PLANT_CONFIG)?;
-    let scada = controller::link::ScadaLink::new(&PLANT_CONFIG)?;
-    let lockstep = controller::plant::Lockstep::new(*scada.slave());
+    let lockstep = controller::plant::Lockstep::for_config(&PLANT_CONFIG)?;
     Ok((core, controller::plant::PlantSession::new(lockstep)))
 }
 
