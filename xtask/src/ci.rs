@@ -31,6 +31,20 @@ pub fn test() -> Result {
         )?;
     }
     run(
+        "clippy (board qemu, plant mode)",
+        cargo()
+            .args([
+                "clippy",
+                "-p",
+                "board-qemu",
+                "--features",
+                "plant",
+                "--target",
+                TARGET,
+            ])
+            .args(["--profile", "firmware", "--", "-D", "warnings"]),
+    )?;
+    run(
         "clippy (mcu-bench, profile firmware)",
         cargo().args([
             "clippy",

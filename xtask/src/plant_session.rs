@@ -282,17 +282,26 @@ impl<E: Endpoint> Exchanges<'_, E> {
     }
 }
 
+/// The pseudo-terminals QEMU made for a plant-mode run.
+#[derive(Debug, Default)]
+pub struct PlantPtys {
+    /// USART2's, the plant line (with `plant` = `pty`).
+    pub plant: Option<String>,
+    /// USART1's, the SCADA slave (with `scada` = `pty`).
+    pub scada: Option<String>,
+}
+
 /// QEMU running the plant-mode image, USART1 (SCADA) on the QEMU serial back-end `scada`
 /// (`null`, `pty`) and USART2 (the plant line) on `plant` (`pty`: a pseudo-terminal of
 /// QEMU's; else a serial device's path), once the firmware has started: the process (killed
-/// when dropped), the plant's pty path if QEMU made one, and QEMU's output lines (its own
-/// and the firmware's decoded log; also printed if `echo`).
+/// when dropped), the ptys QEMU made, and QEMU's output lines (its own and the firmware's
+/// decoded log; also printed if `echo`).
 pub fn start_plant_qemu(
     elf: &Path,
     scada: &str,
     plant: &str,
     echo: bool,
-) -> Result<(Qemu, Option<String>, Receiver<String>)> {
+) -> Result<(Qemu, PlantPtys, Receiver<String>)> {
     let mut cmd = qemu_command(elf, &[]);
     cmd.args(["-display", "none", "-monitor", "none"])
         .args(["-serial", scada, "-serial"]);
@@ -304,18 +313,23 @@ pub fn start_plant_qemu(
     }
     let (qemu, rx) = spawn_with_lines(elf, cmd, echo)?;
     let deadline = Instant::now() + Duration::from_secs(20);
-    let (mut pty, mut started) = (None, false);
-    while (plant == "pty" && pty.is_none()) || !started {
+    let (mut ptys, mut started) = (PlantPtys::default(), false);
+    while (plant == "pty" && ptys.plant.is_none())
+        || (scada == "pty" && ptys.scada.is_none())
+        || !started
+    {
         let left = deadline.saturating_duration_since(Instant::now());
         let line = rx
             .recv_timeout(left)
-            .map_err(|_| "QEMU did not announce the plant's pty and the firmware's start")?;
-        if let Some((Serial::Usart2, path)) = announced_pty(&line) {
-            pty = path;
+            .map_err(|_| "QEMU did not announce its ptys and the firmware's start")?;
+        match announced_pty(&line) {
+            Some((Serial::Usart2, path)) => ptys.plant = path,
+            Some((Serial::Scada, path)) => ptys.scada = path,
+            None => {}
         }
         started |= line.starts_with("firmware:");
     }
-    Ok((qemu, pty, rx))
+    Ok((qemu, ptys, rx))
 }
 
 /// Waits for QEMU to end (the firmware exits after `Q`); its `done:` line, or an error
@@ -380,7 +394,7 @@ pub fn plant_check() -> Result {
     let (host, host_p) = scenario(&mut HostEndpoint::new()?)?;
     let t0 = Instant::now();
     let (qemu, pty, log) = start_plant_qemu(&elf, "null", "pty", false)?;
-    let pty = pty.ok_or("no plant pty")?;
+    let pty = pty.plant.ok_or("no plant pty")?;
     let (board, board_p) = scenario(&mut SerialEndpoint::open(&pty)?)?;
     let done = qemu_done(qemu, &log)?;
     let board_s = t0.elapsed().as_secs_f64();
@@ -402,7 +416,7 @@ pub fn plant_check() -> Result {
     let me = me.to_string_lossy();
     let on_host = python_plant(&["--", &me, "plant-stdio"])?;
     let (qemu, pty, log) = start_plant_qemu(&elf, "null", "pty", false)?;
-    let on_board = python_plant(&[&pty.ok_or("no plant pty")?])?;
+    let on_board = python_plant(&[&pty.plant.ok_or("no plant pty")?])?;
     qemu_done(qemu, &log)?;
     eprintln!("    host: {on_host}\n    QEMU: {on_board}");
     if on_host != on_board {

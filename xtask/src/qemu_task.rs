@@ -172,8 +172,16 @@ fn plant_mode(plant: &str, scada_pty: bool) -> Result {
     build_plant_firmware()?;
     eprintln!("==> qemu, plant mode (until the plant sends Q, or Ctrl-C)");
     let scada = if scada_pty { "pty" } else { "null" };
-    let (mut qemu, pty, _log) = start_plant_qemu(&plant_elf(), scada, plant, true)?;
-    if let Some(pty) = pty {
+    let (mut qemu, ptys, _log) = start_plant_qemu(&plant_elf(), scada, plant, true)?;
+    // The SCADA port as a line for clients that open it per request (mbpoll): the bridge.
+    let bridge = ptys.scada.map(|p| crate::bridge::start(&p)).transpose()?;
+    if let Some(b) = &bridge {
+        eprintln!(
+            "SCADA slave (unit 1, RTU 19200 8N1) on {0}; e.g.\n  mbpoll -m rtu -b 19200 -P none -a 1 -t 3 -r 1 -c 30 {0}",
+            b.path
+        );
+    }
+    if let Some(pty) = ptys.plant {
         eprintln!("plant line on {pty}; e.g.\n  python3 examples/plant.py {pty}");
     }
     // The log is echoed by its thread; wait for QEMU's end.
