@@ -26,7 +26,7 @@
 //! | request | meaning | reply |
 //! |---|---|---|
 //! | `H <version>` | hello: the plant speaks `version` (decimal; this is 1). Optional, but a plant should start with it | `H 1 <period_ms>`: the version spoken and the frame period, ms ([`FRAME_PERIOD_MS`], 5); `E version` for another version |
-//! | `S <pressure_code> <flow_code> <speed_rpm> <torque_pct>` | one frame: the transmitters' ADC codes (integers 0..=4095) and the drive's actual speed (rpm, −32 768..=32 767) and torque (% of nominal, −200..=200), decimal numbers as Rust's or C's `strtof` read them (`1500`, `-3.25`, `1.5e3`) | `T <t_ms> <torque_ref_pct> <status>` |
+//! | `S <pressure_code> <flow_code> <speed_rpm> <torque_pct>` | one frame: the transmitters' ADC codes (integers 0..=4095) and the drive's actual speed (rpm, −32 768..=32 767) and torque (% of nominal, −200..=200), decimal numbers in the syntax of Rust's `f32::from_str` (`1500`, `-3.25`, `1.5e3`, `.5`; no hexadecimal), rounded to the nearest `f32` | `T <t_ms> <torque_ref_pct> <status>` |
 //! | `S <pressure_code> <flow_code> -` | one frame with the VFD link cut (no readings: the controller applies 0 % and freezes its loop, as with its Modbus link down) | `T …` |
 //! | `W <register> <value>` | a holding-register write (the SCADA map, [`crate::scada`]; decimal 0..=65535 both), applied before the next frame | `K`, or `E <code>`: the Modbus exception a SCADA write would get (2 no such register, 3 value refused), nothing changed |
 //! | `Q` | the end of the session | `B` (bye); the controller side then stops reading |
