@@ -1,12 +1,14 @@
 //! `cargo xtask test`: everything CI checks, in order: rustfmt, clippy `-D warnings` (host,
 //! both firmware boards and mcu-bench), the no_std crates built for the MCU, the host tests,
 //! docs, the bench and its budgets (both firmware images), the on-target checks, QEMU runs
-//! against the host replay, the end-to-end test with `mbpoll`, and the flood.
+//! against the host replay, the plant protocol's check (host and QEMU bit for bit,
+//! `examples/plant.py` on both), the end-to-end test with `mbpoll`, and the flood.
 
 use crate::bench;
 use crate::board::{build_firmware, firmware_elf, Board};
 use crate::e2e;
 use crate::flood::{flood, FLOOD_S};
+use crate::plant_session::plant_check;
 use crate::replay::{replay, selftest};
 use crate::util::{cargo, run, Result, TARGET};
 use std::time::Instant;
@@ -28,6 +30,20 @@ pub fn test() -> Result {
                 .args(["--profile", "firmware", "--", "-D", "warnings"]),
         )?;
     }
+    run(
+        "clippy (board qemu, plant mode)",
+        cargo()
+            .args([
+                "clippy",
+                "-p",
+                "board-qemu",
+                "--features",
+                "plant",
+                "--target",
+                TARGET,
+            ])
+            .args(["--profile", "firmware", "--", "-D", "warnings"]),
+    )?;
     run(
         "clippy (mcu-bench, profile firmware)",
         cargo().args([
@@ -69,6 +85,7 @@ pub fn test() -> Result {
     eprintln!("==> on-target checks in QEMU (boards/qemu selftest)");
     print!("{}", selftest()?);
     replay(&elf)?;
+    plant_check()?;
     eprintln!("==> end to end: QEMU in real time, SCADA on a pty, mbpoll as the client");
     print!("{}", e2e::run(&elf)?);
     eprintln!("==> SCADA flooded, the VFD on USART2 busy: in real time, then -icount shift=0");

@@ -15,6 +15,11 @@
 //! - `replay`, `e2e`, `flood`: one part of `test` alone (the on-target checks and the QEMU
 //!   runs against the host replay; the end-to-end test; the flood).
 //!
+//! - `plant-check`: the plant protocol ([`plant_session`]): a scenario plant against the host's
+//!   session and the QEMU board in plant mode, every reply identical bit for bit, and
+//!   `examples/plant.py` against both (part of `test`); `plant-stdio`: the controller's side
+//!   of the protocol on standard input and output, for a plant that runs it as its child.
+//!
 //! Needs `qemu-system-arm` and `mbpoll` on the PATH (Debian packages of the same names).
 //!
 //! This file only dispatches. The tasks: [`qemu_task`], [`bench`](mod@bench), [`ci`] (`test`),
@@ -35,6 +40,7 @@ mod flood;
 mod line;
 mod mbpoll;
 mod observe_session;
+mod plant_session;
 mod protection_session;
 mod qemu;
 mod qemu_task;
@@ -48,7 +54,7 @@ use util::Result;
 
 /// `cargo xtask`'s usage (with no task or an unknown one).
 fn usage() -> String {
-    format!("usage: cargo xtask <qemu|bench|test|replay|e2e|flood>\n  qemu   build the firmware and run it in QEMU on the virtual bench\n  bench  the kernels' instructions per call on the MCU, image sizes, checked against bench/baseline.json and the budgets\n  test   fmt, clippy, tests, the bench and its budgets, QEMU runs against the host, mbpoll end to end\n  replay only the on-target checks and the QEMU runs against the host replay\n  e2e    only the mbpoll end-to-end test\n  flood  only the margins under a SCADA flood with the VFD link busy\n{}\n{}", qemu_task::QEMU_USAGE, bench::BENCH_USAGE)
+    format!("usage: cargo xtask <qemu|bench|test|replay|e2e|flood|plant-check|plant-stdio>\n  qemu   build the firmware and run it in QEMU on the virtual bench\n  bench  the kernels' instructions per call on the MCU, image sizes, checked against bench/baseline.json and the budgets\n  test   fmt, clippy, tests, the bench and its budgets, QEMU runs against the host, mbpoll end to end\n  replay only the on-target checks and the QEMU runs against the host replay\n  e2e    only the mbpoll end-to-end test\n  flood  only the margins under a SCADA flood with the VFD link busy\n  plant-check  the plant protocol: a scenario plant against the host and the QEMU board, bit for bit; examples/plant.py against both\n  plant-stdio  the controller's side of the plant protocol on stdin/stdout (e.g. python3 examples/plant.py -- cargo xtask plant-stdio)\n{}\n{}", qemu_task::QEMU_USAGE, bench::BENCH_USAGE)
 }
 
 /// Runs the task `args[0]` with its arguments.
@@ -56,6 +62,8 @@ fn dispatch(args: &[String]) -> Result {
     match args.first().map(String::as_str) {
         Some("qemu") => qemu_task::qemu(&args[1..]),
         Some("test") => ci::test(),
+        Some("plant-stdio") => plant_session::plant_stdio(),
+        Some("plant-check") => plant_session::plant_check(),
         Some("bench") => bench::run_bench(&bench::Options::parse(&args[1..])?),
         Some("flood") => build_firmware(Board::Qemu).and_then(|()| {
             print!("{}", flood(&firmware_elf(Board::Qemu), FLOOD_S, false)?);
@@ -99,7 +107,16 @@ mod tests {
         assert_eq!(dispatch(&[]), Err(usage()));
         assert_eq!(dispatch(&args("tests")), Err(usage()));
         let u = usage();
-        for task in ["qemu", "bench", "test", "replay", "e2e", "flood"] {
+        for task in [
+            "qemu",
+            "bench",
+            "test",
+            "replay",
+            "e2e",
+            "flood",
+            "plant-check",
+            "plant-stdio",
+        ] {
             assert!(u.contains(&format!("\n  {task} ")), "{task}");
         }
         assert!(u.ends_with(bench::BENCH_USAGE));

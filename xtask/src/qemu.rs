@@ -162,19 +162,14 @@ pub fn announced_pty(line: &str) -> Option<(Serial, Option<String>)> {
     })
 }
 
-/// QEMU with its SCADA port on a pseudo-terminal, started: the process (killed when
-/// dropped), the [`bridge`](crate::bridge) that offers clients the port as a line (its
-/// `path`), and QEMU's output lines (also echoed to the terminal if `echo`).
-pub fn start_pty(
+/// Starts QEMU's `cmd` running the image `elf`: the process (killed when dropped) and its
+/// output lines, as they come: its own (stderr, and the ptys it names on stdout) and the
+/// firmware's defmt log decoded (also echoed to the terminal if `echo`).
+pub fn spawn_with_lines(
     elf: &Path,
     mut cmd: Command,
     echo: bool,
-) -> Result<(
-    Qemu,
-    crate::bridge::Bridge,
-    std::sync::mpsc::Receiver<String>,
-    Option<String>,
-)> {
+) -> Result<(Qemu, std::sync::mpsc::Receiver<String>)> {
     cmd.stdin(Stdio::null())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped());
@@ -218,6 +213,23 @@ pub fn start_pty(
             }
         }
     });
+    Ok((qemu, rx))
+}
+
+/// QEMU with its SCADA port on a pseudo-terminal, started: the process (killed when
+/// dropped), the [`bridge`](crate::bridge) that offers clients the port as a line (its
+/// `path`), and QEMU's output lines (also echoed to the terminal if `echo`).
+pub fn start_pty(
+    elf: &Path,
+    cmd: Command,
+    echo: bool,
+) -> Result<(
+    Qemu,
+    crate::bridge::Bridge,
+    std::sync::mpsc::Receiver<String>,
+    Option<String>,
+)> {
+    let (qemu, rx) = spawn_with_lines(elf, cmd, echo)?;
     let deadline = Instant::now() + Duration::from_secs(20);
     let (mut pty, mut second) = (None, None);
     let mut started = false;

@@ -3,17 +3,24 @@
 //! a pseudo-terminal and/or the VFD master on a host serial device.
 
 use crate::board::{build_firmware, firmware_elf, Board};
+use crate::plant_session::{build_plant_firmware, plant_elf, start_plant_qemu};
 use crate::qemu::{qemu_command, qemu_log, start_pty};
 use crate::util::Result;
 
 /// `cargo xtask qemu`'s usage.
-pub const QEMU_USAGE: &str = "usage: cargo xtask qemu [--scada-pty] [--vfd PTY] [--seconds N] [--mode 0|1|2] [--setpoint 0..10000] [--seed N] [--narmax f32|q15]
+pub const QEMU_USAGE: &str = "usage: cargo xtask qemu [--scada-pty] [--vfd PTY | --plant PTY|pty] [--seconds N] [--mode 0|1|2] [--setpoint 0..10000] [--seed N] [--narmax f32|q15]
   (no --scada-pty)  run the virtual bench for --seconds (default 20) of loop time, mode 2 (the
                     paper's excitation) unless --mode says otherwise, deterministic and faster
                     than real time (-icount); the kernels' cost is `cargo xtask bench`
   --scada-pty       real time, until stopped (Ctrl-C): the SCADA slave (unit 1, 19200 8N1 RTU)
                     on a pseudo-terminal; QEMU prints its path. Starts stopped (mode 0).
-  --vfd PTY         the VFD master on USART2 to that serial device (e.g. pumpbench vfd-sim's)";
+  --vfd PTY         the VFD master on USART2 to that serial device (e.g. pumpbench vfd-sim's)
+  --plant PTY|pty   plant mode (the pump-qemu-plant image): no virtual bench and no VFD link,
+                    an external plant closes the loop in lockstep over USART2, speaking the
+                    plant protocol (controller::plant), on that serial device, or with `pty`
+                    on a pseudo-terminal QEMU makes and names (python3 examples/plant.py
+                    /dev/pts/N); ends when the plant sends Q. Takes no --mode, --setpoint,
+                    --seed, --narmax, --seconds: the plant writes the registers";
 
 /// Options of `cargo xtask qemu`.
 #[derive(Debug, PartialEq)]
@@ -22,6 +29,9 @@ struct QemuOptions {
     scada_pty: bool,
     /// `--vfd PTY`: real time, USART2 (the VFD master) on that serial device.
     vfd: Option<String>,
+    /// `--plant PTY`: plant mode, USART2 (the plant line) on that serial device, or on a
+    /// pseudo-terminal of QEMU's (`pty`).
+    plant: Option<String>,
     /// `--seconds N`: loop time of a deterministic run, s (default 20).
     seconds: u32,
     /// The firmware's semihosting arguments from `--mode`, `--setpoint`, `--seed`,
@@ -56,6 +66,7 @@ fn parse_qemu_options(args: &[String]) -> Result<QemuOptions> {
     let mut o = QemuOptions {
         scada_pty: false,
         vfd: None,
+        plant: None,
         seconds: 20,
         firmware_args: vec![],
     };
@@ -69,6 +80,7 @@ fn parse_qemu_options(args: &[String]) -> Result<QemuOptions> {
         match a.as_str() {
             "--scada-pty" => o.scada_pty = true,
             "--vfd" => o.vfd = Some(value("--vfd")?),
+            "--plant" => o.plant = Some(value("--plant")?),
             "--seconds" => {
                 o.seconds = value("--seconds")?
                     .parse()
@@ -85,6 +97,11 @@ fn parse_qemu_options(args: &[String]) -> Result<QemuOptions> {
             other => return Err(format!("unknown option '{other}'\n{QEMU_USAGE}")),
         }
     }
+    if o.plant.is_some() && (o.vfd.is_some() || !o.firmware_args.is_empty()) {
+        return Err(format!(
+            "--plant takes no --vfd, --mode, --setpoint, --seed or --narmax\n{QEMU_USAGE}"
+        ));
+    }
     Ok(o)
 }
 
@@ -92,6 +109,9 @@ fn parse_qemu_options(args: &[String]) -> Result<QemuOptions> {
 /// and runs it; a deterministic run prints the decoded log.
 pub fn qemu(args: &[String]) -> Result {
     let o = parse_qemu_options(args)?;
+    if let Some(plant) = &o.plant {
+        return plant_mode(plant, o.scada_pty);
+    }
     build_firmware(Board::Qemu)?;
     let elf = firmware_elf(Board::Qemu);
     let fw_args = o.firmware_args();
@@ -144,6 +164,35 @@ pub fn qemu(args: &[String]) -> Result {
     Ok(())
 }
 
+/// `cargo xtask qemu --plant PLANT [--scada-pty]`: the plant-mode image in real time, the plant
+/// line on the serial device `plant` or (`pty`) on a pseudo-terminal QEMU names, the SCADA
+/// slave on a pseudo-terminal with `--scada-pty`; until the plant sends `Q` (QEMU exits) or
+/// Ctrl-C.
+fn plant_mode(plant: &str, scada_pty: bool) -> Result {
+    build_plant_firmware()?;
+    eprintln!("==> qemu, plant mode (until the plant sends Q, or Ctrl-C)");
+    let scada = if scada_pty { "pty" } else { "null" };
+    let (mut qemu, ptys, _log) = start_plant_qemu(&plant_elf(), scada, plant, true)?;
+    // The SCADA port as a line for clients that open it per request (mbpoll): the bridge.
+    let bridge = ptys.scada.map(|p| crate::bridge::start(&p)).transpose()?;
+    if let Some(b) = &bridge {
+        eprintln!(
+            "SCADA slave (unit 1, RTU 19200 8N1) on {0}; e.g.\n  mbpoll -m rtu -b 19200 -P none -a 1 -t 3 -r 1 -c 30 {0}",
+            b.path
+        );
+    }
+    if let Some(pty) = ptys.plant {
+        eprintln!("plant line on {pty}; e.g.\n  python3 examples/plant.py {pty}");
+    }
+    // The log is echoed by its thread; wait for QEMU's end.
+    let status = qemu.0.wait().map_err(|e| format!("qemu: {e}"))?;
+    if status.success() {
+        Ok(())
+    } else {
+        Err(format!("qemu: {status}"))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -184,6 +233,27 @@ mod tests {
         assert!(o.real_time() && !o.scada_pty);
         assert_eq!(o.vfd.as_deref(), Some("/dev/pts/9"));
         assert_eq!(o.firmware_args(), ["mode=1", "vfd=uart"]);
+    }
+
+    #[test]
+    fn plant_mode_options() {
+        let o = parse_qemu_options(&args("--plant pty")).unwrap();
+        assert_eq!(o.plant.as_deref(), Some("pty"));
+        let o = parse_qemu_options(&args("--scada-pty --plant /dev/pts/4")).unwrap();
+        assert_eq!(o.plant.as_deref(), Some("/dev/pts/4"));
+        assert!(o.scada_pty && o.firmware_args.is_empty());
+        for s in [
+            "--plant pty --mode 3",
+            "--plant pty --vfd /dev/pts/1",
+            "--seed 2 --plant x",
+        ] {
+            let e = parse_qemu_options(&args(s)).unwrap_err();
+            assert!(e.starts_with("--plant takes no"), "{s}: {e}");
+        }
+        assert_eq!(
+            parse_qemu_options(&args("--plant")).unwrap_err(),
+            "--plant needs a value"
+        );
     }
 
     #[test]

@@ -122,6 +122,19 @@ pub fn build_controller(config: &Config) -> Result<Controller, Error> {
     Controller::new(config, p, q)
 }
 
+/// The configuration of plant mode (`cargo xtask qemu --plant`, `pumpbench control
+/// --plant-stdio`), the protocol's own.
+pub use controller::plant::PLANT_CONFIG;
+
+/// The controller and the plant session of plant mode, from [`PLANT_CONFIG`]: the same on
+/// the host and the board, so that the same frames give the same replies bit for bit (the
+/// protocol: [`controller::plant`]).
+pub fn plant_session() -> Result<(Controller, controller::plant::PlantSession), Error> {
+    let core = build_controller(&PLANT_CONFIG)?;
+    let lockstep = controller::plant::Lockstep::for_config(&PLANT_CONFIG)?;
+    Ok((core, controller::plant::PlantSession::new(lockstep)))
+}
+
 /// Milliseconds from a free-running microsecond counter (32 bits, wrapping), counted by
 /// differences: read it at least once per 71 minutes.
 #[derive(Debug, Clone, Copy)]
@@ -355,6 +368,21 @@ mod tests {
     fn the_compiled_in_controller_builds() {
         assert!(FLOW_MS.is_multiple_of(PRESSURE_MS) && PRESSURE_MS > 0);
         assert!(build_controller(&Config::bench()).is_ok());
+    }
+
+    /// The plant session answers a hello and a frame (the protocol's own tests are in
+    /// `controller::plant`).
+    #[test]
+    fn the_plant_session_serves_lines() {
+        let (mut core, mut session) = plant_session().unwrap();
+        let mut out = std::string::String::new();
+        for &b in b"H 1\nW 1 1\nS 745 745 0 0\n" {
+            session.feed(b, &mut core, &mut out, |_| {}).unwrap();
+        }
+        let lines: std::vec::Vec<&str> = out.lines().collect();
+        assert_eq!(lines[..2], ["H 1 5", "K"]);
+        assert!(lines[2].starts_with("T 4 "), "{out}");
+        assert_eq!(session.lockstep().scada().holding()[1], 1);
     }
 
     /// The on-target checks pass on the host too (`cargo xtask replay` compares the digests).

@@ -163,6 +163,17 @@ impl PortTask {
         self.framer.poll(self.now_us, out)
     }
 
+    /// The next received byte, for a port that carries text lines instead of RTU frames
+    /// (the QEMU board's plant line): gap marks are skipped; `None` if none is waiting.
+    pub fn take_byte(&mut self) -> Option<u8> {
+        while let Some(e) = self.rx.dequeue() {
+            if e != GAP {
+                return Some(e as u8);
+            }
+        }
+        None
+    }
+
     /// Queues `frame` for sending and pends the port's interrupt; `false` if the queue is
     /// full (the frame is dropped).
     pub fn send_frame(&mut self, frame: &[u8]) -> bool {
@@ -419,6 +430,21 @@ mod tests {
         tx.1.set(false);
         assert!(!isr.on_interrupt(&margin).sending);
         assert_eq!(tx.0.borrow()[..], [9, 8, 7, 1, 2]);
+    }
+
+    #[test]
+    fn bytes_are_taken_one_by_one_without_the_gap_marks() {
+        let (mut isr, mut task, rx, _) = port::<64, 3>(1000, None);
+        let margin = Margin::new();
+        assert_eq!(task.take_byte(), None);
+        rx.bytes(b"S 1");
+        isr.on_interrupt(&margin);
+        isr.mark_gap(&margin);
+        rx.bytes(b"\n");
+        isr.on_interrupt(&margin);
+        let got: Vec<u8> = core::iter::from_fn(|| task.take_byte()).collect();
+        assert_eq!(got, b"S 1\n");
+        assert_eq!(task.take_byte(), None);
     }
 
     #[test]
