@@ -412,9 +412,19 @@ pub fn plant_check() -> Result {
         SCENARIO_MS / 1000
     );
     eprintln!("==> {PLANT_PY} against cargo xtask plant-stdio and against the QEMU board");
-    let me = std::env::current_exe().map_err(|e| format!("xtask's path: {e}"))?;
-    let me = me.to_string_lossy();
-    let on_host = python_plant(&["--", &me, "plant-stdio"])?;
+    // Through cargo, not this executable's path: `cargo xtask test` rebuilds xtask (clippy,
+    // the tests) while it runs, and the running binary's path is then gone.
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let on_host = python_plant(&[
+        "--",
+        &cargo,
+        "run",
+        "-q",
+        "-p",
+        "xtask",
+        "--",
+        "plant-stdio",
+    ])?;
     let (qemu, pty, log) = start_plant_qemu(&elf, "null", "pty", false)?;
     let on_board = python_plant(&[&pty.plant.ok_or("no plant pty")?])?;
     qemu_done(qemu, &log)?;
