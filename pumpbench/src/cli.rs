@@ -347,6 +347,28 @@ pub struct BenchDataArgs {
     /// with. E.g. `20:1.3,40:0.7,60:1`.
     #[arg(long, value_name = "T:FACTOR,...", allow_hyphen_values = true)]
     pub valve_steps: Option<String>,
+    /// The plant: curve error, water inertia, drive lag, pressure transmitter lag.
+    #[command(flatten)]
+    pub plant: PlantArgs,
+    /// Add the columns speed_true (rpm), flow_true (l/s), pressure_true (mca) and k2_true
+    /// (√mca/(l/s)) after the readings: the bench's true state at the row's time, before
+    /// transmitter lag, noise and quantisation (shortest round-trip form).
+    #[arg(long)]
+    pub truth: bool,
+    /// First-order lag of the flow transmitter, ms (0..2000; 0: none).
+    #[arg(
+        long,
+        value_name = "MS",
+        default_value = "40",
+        allow_hyphen_values = true
+    )]
+    pub flow_lag_ms: String,
+}
+
+/// The plant's options shared by `bench-data` and `control` (their documentation is their
+/// help text; the flow transmitter's lag is each command's own, its default differs).
+#[derive(Args)]
+pub struct PlantArgs {
     /// Curve error PCT, % (-20..20): the TRUE bench's pump-head curve F_H is the paper's
     /// times (1 + PCT/100) (all ten alpha) and its load-torque curve F_T the paper's times
     /// (1 - PCT/100) (all ten beta). PCT > 0: a stronger pump and a lighter load than the
@@ -378,19 +400,6 @@ pub struct BenchDataArgs {
         allow_hyphen_values = true
     )]
     pub drive_lag_ms: String,
-    /// Add the columns speed_true (rpm), flow_true (l/s), pressure_true (mca) and k2_true
-    /// (√mca/(l/s)) after the readings: the bench's true state at the row's time, before
-    /// transmitter lag, noise and quantisation (shortest round-trip form).
-    #[arg(long)]
-    pub truth: bool,
-    /// First-order lag of the flow transmitter, ms (0..2000; 0: none).
-    #[arg(
-        long,
-        value_name = "MS",
-        default_value = "40",
-        allow_hyphen_values = true
-    )]
-    pub flow_lag_ms: String,
     /// First-order lag of the pressure transmitter, ms (0..2000; 0: none).
     #[arg(
         long,

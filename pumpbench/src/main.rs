@@ -20,6 +20,7 @@ mod narmaxcmd;
 mod num;
 mod observe;
 mod output;
+mod plant;
 mod plots;
 mod simulate;
 mod study;
