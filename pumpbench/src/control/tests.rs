@@ -1,0 +1,3 @@
+//! Unit tests of `control`: the figures on known responses, the scenarios.
+
+use super::*;
