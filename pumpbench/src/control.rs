@@ -390,11 +390,7 @@ pub fn read_scenario(path: &Path, hold_s: f64) -> Result<Scenario, InputError> {
                 line,
                 col(0),
                 "t_s",
-                format!(
-                    "time {} s is beyond the longest scenario, {} s",
-                    Short(t_s),
-                    Short(MAX_SCENARIO_S)
-                ),
+                format!("time {t_s} s is beyond the longest scenario, {MAX_SCENARIO_S} s"),
             ));
         }
         let mode_v = number(1, "mode")?
@@ -461,8 +457,8 @@ pub fn read_scenario(path: &Path, hold_s: f64) -> Result<Scenario, InputError> {
         let flag = |k: usize, name: &str| -> Result<bool, InputError> {
             match number(k, name)? {
                 None => Ok(true),
-                Some(v) if v == 1.0 => Ok(true),
-                Some(v) if v == 0.0 => Ok(false),
+                Some(1.0) => Ok(true),
+                Some(0.0) => Ok(false),
                 Some(v) => Err(err(
                     line,
                     col(k),
@@ -550,15 +546,20 @@ fn start_torque(plant: &Plant, row: &Row) -> Result<f64, Failure> {
         4 => Target::FlowLps(row.setpoint),
         _ => return Ok(0.0),
     };
-    steady_torque(p, load, target)
-        .map(|s| s.torque_ref_pct)
-        .map_err(|e| Failure {
-            code: 2,
-            message: format!(
-                "the first row's setpoint {} has no steady state on this plant: {e}",
-                Short(row.setpoint)
-            ),
-        })
+    let no_start = |why: String| Failure {
+        code: 2,
+        message: format!(
+            "the first row's setpoint {} {} cannot be held on this plant: {why}",
+            Short(row.setpoint),
+            unit(row.mode)
+        ),
+    };
+    let s =
+        steady_torque(p, load, target).map_err(|e| no_start(format!("no steady state ({e})")))?;
+    if s.limited && s.torque_ref_pct > 0.0 {
+        return Err(no_start("it needs more than 100 % torque".into()));
+    }
+    Ok(s.torque_ref_pct)
 }
 
 /// The built-in plant for `scenario`, settled where its first row holds, and the torque that
