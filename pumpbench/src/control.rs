@@ -520,9 +520,11 @@ pub struct Trace {
     /// Steps whose torque was outside 0..=100 % or, in modes 3 and 4, the limits of
     /// holding registers 10 and 11.
     pub out_of_limits: u64,
-    /// The largest torque change between two periods, both with the link up and no trip,
-    /// %/s (the rate limit, register 12, is 200 %/s by default).
+    /// The largest torque change between two periods, the second with the link up and no
+    /// trip (a cut link's or a trip's 0 % excepted, the way back included), %/s.
     pub max_rate_pct_per_s: f64,
+    /// The torque rate limit of holding register 12 (every mode switch and the loops), %/s.
+    pub rate_limit_pct_per_s: f64,
 }
 
 fn refused(what: &str, e: controller::modbus::Exception) -> Failure {
@@ -634,6 +636,7 @@ pub fn run(
         nan_steps: 0,
         out_of_limits: 0,
         max_rate_pct_per_s: 0.0,
+        rate_limit_pct_per_s: f64::from(lock.scada().commands().control.rate_pct_per_s),
     };
     let mut last_torque: Option<f32> = None;
     let mut t = start_ms;
@@ -687,13 +690,14 @@ pub fn run(
             code: 1,
             message: "a period without a controller step".into(),
         })?;
+        // The rate into every period with the link up and no trip (the drop to 0 % of a cut
+        // link or a trip is allowed; the way back up is not a step).
         let status = Status::from_bits(reply.status);
-        let steady_link = status.vfd_link_ok && !status.tripped;
-        if let (Some(prev), true) = (last_torque, steady_link) {
+        if let (Some(prev), true) = (last_torque, status.vfd_link_ok && !status.tripped) {
             let rate = f64::from((reply.torque_ref_pct - prev).abs()) / (period as f64 * 1e-3);
             trace.max_rate_pct_per_s = trace.max_rate_pct_per_s.max(rate);
         }
-        last_torque = steady_link.then_some(reply.torque_ref_pct);
+        last_torque = Some(reply.torque_ref_pct);
         plant.apply(&reply)?;
         trace.samples.push(Sample {
             t_s: t as f64 * 1e-3,
@@ -1059,8 +1063,8 @@ pub fn report(
     for (trace, _) in runs {
         let _ = writeln!(
             s,
-            "{}: torque NaN steps {}, outside its limits {}, largest change with the link up \
-             {:.1} %/s",
+            "{}: torque NaN steps {}, outside its limits {}, largest change into a period with \
+             the link up {:.1} %/s",
             trace.law.name(),
             trace.nan_steps,
             trace.out_of_limits,
@@ -1185,11 +1189,17 @@ pub fn report(
         let _ = writeln!(s);
         for (trace, _) in runs {
             let ok = trace.nan_steps == 0 && trace.out_of_limits == 0;
+            // A period's change at the rate limit, with f32 rounding.
+            let smooth = trace.max_rate_pct_per_s <= trace.rate_limit_pct_per_s * (1.0 + 1e-4);
             let _ = writeln!(
                 s,
-                "{}: target: never a NaN, never a torque outside its limits {}",
+                "{}: target: never a NaN, never a torque outside its limits {}; never a \
+                 torque step (every change into a period with the link up within the rate limit, {} \
+                 %/s) {}",
                 trace.law.name(),
-                if ok { "PASS" } else { "MISS" }
+                if ok { "PASS" } else { "MISS" },
+                Short(trace.rate_limit_pct_per_s),
+                if smooth { "PASS" } else { "MISS" }
             );
         }
     }

@@ -138,6 +138,7 @@ fn trace_of(samples: &[(f64, usize, u16, f64, f64)]) -> Trace {
         nan_steps: 0,
         out_of_limits: 0,
         max_rate_pct_per_s: 0.0,
+        rate_limit_pct_per_s: 200.0,
     }
 }
 
@@ -397,8 +398,11 @@ fn a_short_pressure_loop_on_the_built_in_plant_settles() {
         assert!(u0 > 0.0 && u0 < 100.0, "{u0}");
         let trace = run(&mut plant, &scenario, law, u0, || {}).unwrap();
         assert_eq!((trace.nan_steps, trace.out_of_limits), (0, 0), "{law:?}");
+        // The default rate limit (register 12: 200 %/s), up to the f32 rounding of a period's
+        // 1 % change.
+        assert_eq!(trace.rate_limit_pct_per_s, 200.0);
         assert!(
-            trace.max_rate_pct_per_s <= 200.0 + 1e-3,
+            trace.max_rate_pct_per_s <= 200.0 * (1.0 + 1e-4),
             "{law:?}: {}",
             trace.max_rate_pct_per_s
         );
