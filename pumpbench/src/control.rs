@@ -1358,7 +1358,13 @@ pub fn command(a: ControlArgs) -> Result<(), Failure> {
     if let Some(png) = &a.plot {
         plot::draw(png, &scenario, &runs)?;
     }
-    print!("{}", report(&scenario, &plant_text, &runs, a.targets, true));
+    let truth = runs
+        .iter()
+        .all(|(t, _)| t.samples.iter().all(|s| s.truth.is_some()));
+    print!(
+        "{}",
+        report(&scenario, &plant_text, &runs, a.targets, truth)
+    );
     Ok(())
 }
 
