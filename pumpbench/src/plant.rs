@@ -728,4 +728,110 @@ mod tests {
         }
         assert!((x - (1.0 - (-1.0f64).exp())).abs() < 1e-12);
     }
+
+    /// At its steady state the plant stays there; a frame's codes read back (with the
+    /// controller's loop model) give the readings `bench-data` logs from the same noise draws.
+    #[test]
+    fn frames_carry_the_logged_readings_as_codes() {
+        let o = PlantOptions::with_seed(4);
+        let mut a = Plant::new(&o, 1.2, 55.0).unwrap();
+        let mut b = a.clone();
+        let start = a.truth();
+        for _ in 0..500 {
+            a.advance(55.0, 1e-3).unwrap();
+            b.advance(55.0, 1e-3).unwrap();
+        }
+        let t = a.truth();
+        assert!(
+            (t.speed_rpm - start.speed_rpm).abs() < 1e-6,
+            "{t:?} vs {start:?}"
+        );
+        assert!((t.valve_k2 - 1.2 * BenchParams::<f64>::paper().valve_k2).abs() < 1e-15);
+        for _ in 0..20 {
+            let (speed, flow, pressure) = a.readings();
+            let f = b.frame();
+            let back = |l: &LoopConfig, code: u16| f64::from(l.value_unclamped(l.current_ma(code)));
+            assert_eq!(back(&PRESSURE_LOOP, f.pressure_code), pressure);
+            assert_eq!(back(&FLOW_LOOP, f.flow_code), flow);
+            let d = f.drive.unwrap();
+            assert_eq!(f64::from(d.speed_rpm), speed as f32 as f64);
+            assert_eq!(f64::from(d.torque_pct), t.torque_pct as f32 as f64);
+            assert_eq!(d.status, 0);
+            // Within the noise's bound (3.46 σ) and a code of the truth.
+            assert!((pressure - t.pressure_mca).abs() < 3.5 * PRESSURE.noise + 0.0035);
+            assert!((flow - t.flow_lps).abs() < 3.5 * FLOW.noise + 0.011);
+        }
+    }
+
+    /// A failed transmitter reads 2 mA (an NE 43 fault for the controller's input), a cut link
+    /// gives no drive readings; the noise draws go on as they would (the other signals are
+    /// what they would have been).
+    #[test]
+    fn failed_sensors_and_a_cut_link_show_in_the_frame() {
+        let o = PlantOptions::with_seed(9);
+        let mut a = Plant::new(&o, 1.0, 40.0).unwrap();
+        let mut b = a.clone();
+        b.set_sensors(SensorState {
+            flow_meter: false,
+            pressure_meter: true,
+            link: false,
+        });
+        let (fa, fb) = (a.frame(), b.frame());
+        assert_eq!(fb.flow_code, FLOW_LOOP.code(FAULT_MA));
+        assert!(FLOW_LOOP.current_ma(fb.flow_code) < model_core::transmitter::FAULT_LOW_MA);
+        assert_eq!(fb.pressure_code, fa.pressure_code);
+        assert!(fa.drive.is_some() && fb.drive.is_none());
+        b.set_sensors(SensorState {
+            pressure_meter: false,
+            ..SensorState::OK
+        });
+        let (fa, fb) = (a.frame(), b.frame());
+        assert_eq!(fb.pressure_code, PRESSURE_LOOP.code(FAULT_MA));
+        assert_eq!((fb.flow_code, fb.drive), (fa.flow_code, fa.drive));
+    }
+
+    #[test]
+    fn valve_factors_outside_the_range_are_refused() {
+        let mut p = Plant::new(&PlantOptions::with_seed(1), 1.0, 30.0).unwrap();
+        for bad in [0.1, 5.5, f64::NAN, f64::INFINITY] {
+            assert!(
+                matches!(p.set_valve_factor(bad), Err(PlantError::Options(_))),
+                "{bad}"
+            );
+        }
+        let k2 = p.truth().valve_k2;
+        assert!(p.set_valve_factor(0.2).is_ok() && p.set_valve_factor(5.0).is_ok());
+        assert_eq!(p.truth().valve_k2, 5.0 * k2);
+        assert!(matches!(
+            Plant::new(&PlantOptions::with_seed(1), 1.0, 120.0),
+            Err(PlantError::Model(_))
+        ));
+    }
+
+    /// With a drive lag the delivered torque (the drive's reading) follows a torque step
+    /// through the lag: 63 % of the way after one time constant.
+    #[test]
+    fn the_drive_reading_follows_its_lag() {
+        let o = PlantOptions {
+            dynamics: Dynamics {
+                water_inertia: 0.0,
+                drive_lag_s: 0.05,
+            },
+            ..PlantOptions::with_seed(1)
+        };
+        let gamma = BenchParams::<f64>::paper().gamma;
+        let (te0, te1) = (
+            electromagnetic_torque_pct(&gamma, 30.0),
+            electromagnetic_torque_pct(&gamma, 60.0),
+        );
+        let mut p = Plant::new(&o, 1.0, 30.0).unwrap();
+        assert!((p.truth().torque_pct - te0).abs() < 1e-9);
+        for _ in 0..50 {
+            p.advance(60.0, 1e-3).unwrap();
+        }
+        let frac = (p.truth().torque_pct - te0) / (te1 - te0);
+        assert!((frac - (1.0 - (-1.0f64).exp())).abs() < 1e-9, "{frac}");
+        let d = p.frame().drive.unwrap();
+        assert_eq!(d.torque_pct, p.truth().torque_pct as f32);
+    }
 }
