@@ -1072,6 +1072,8 @@ pub fn report(
         );
     }
     let n = runs.first().map_or(0, |r| r.1.len());
+    // Each run's figure targets: (met, all).
+    let mut tally = vec![(0u32, 0u32); runs.len()];
     for i in 0..n {
         let f0 = &runs[0].1[i];
         let u = unit(f0.mode);
@@ -1140,9 +1142,16 @@ pub fn report(
                 if let Some(l) = limits.iter().find(|l| l.figure == *key) {
                     let verdicts: Vec<&str> = runs
                         .iter()
-                        .map(|(_, figs)| match figure_value(&figs[i], key) {
-                            Some(v) if v <= l.limit => "PASS",
-                            _ => "MISS",
+                        .zip(tally.iter_mut())
+                        .map(|((_, figs), (pass, all))| {
+                            *all += 1;
+                            match figure_value(&figs[i], key) {
+                                Some(v) if v <= l.limit => {
+                                    *pass += 1;
+                                    "PASS"
+                                }
+                                _ => "MISS",
+                            }
                         })
                         .collect();
                     let _ = write!(s, "   ≤ {} {}", Short(l.limit), verdicts.join(" / "));
@@ -1178,7 +1187,7 @@ pub fn report(
             if let (Some(x), Some(y)) = (a[i].iae, b[i].iae) {
                 let _ = writeln!(
                     s,
-                    "  IAE model / pi = {:.2}   target: no worse than pi {}",
+                    "  IAE model / pi = {:.3}   target: no worse than pi {}",
                     if y > 0.0 { x / y } else { f64::NAN },
                     if x <= y { "PASS" } else { "MISS" }
                 );
@@ -1187,6 +1196,13 @@ pub fn report(
     }
     if with_targets {
         let _ = writeln!(s);
+        for ((trace, _), (pass, all)) in runs.iter().zip(&tally) {
+            let _ = writeln!(
+                s,
+                "{}: {pass} of the {all} figure targets above met",
+                trace.law.name()
+            );
+        }
         for (trace, _) in runs {
             let ok = trace.nan_steps == 0 && trace.out_of_limits == 0;
             // A period's change at the rate limit, with f32 rounding.
