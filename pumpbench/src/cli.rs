@@ -110,6 +110,71 @@ pub enum Command {
     /// observer against a known truth, which `--truth` writes beside the readings. Without
     /// these options the record is the paper's bench, as always.
     BenchData(BenchDataArgs),
+    /// Close the controller's pressure and flow loops (modes 3 and 4) around a built-in plant
+    /// and measure them: the MCU's own controller, in lockstep with `bench-data`'s bench (5 ms
+    /// frames of 12-bit transmitter codes and drive readings), the scenario applied as SCADA
+    /// holding-register writes. Prints, per scenario row, on the plant's TRUE pressure or
+    /// flow: 10-90 % rise, overshoot, 2 % settling time and IAE after a setpoint step; peak
+    /// deviation and time back within 2 % after any other change; the steady error over the
+    /// row's last second. Every run starts settled (3 s in mode 1 at the torque that holds the
+    /// first row, then 3 s of the first row); figures from t = 0.
+    ///
+    /// Built-in scenarios: pressure-steps (mode 3: 2, then 4, 1, 3 mca at 2, 8, 14 s),
+    /// valve-steps (3 mca; valve x1.3, x1, x0.7, x1 at 2, 7, 12, 17 s), flow-steps (mode 4:
+    /// 10, then 15, 8, 12 l/s at 2, 8, 14 s, then valve x1.3, x1, x0.7, x1 at 20, 25, 30,
+    /// 35 s; flow transmitter 150 ms unless --flow-lag-ms), flow-meter-lost (12 l/s, the flow
+    /// meter fails at 2 s, then the valve steps at 7, 12, 17, 22 s), link-cut (3 mca, the VFD
+    /// link cut from 2 to 4 s). Or a CSV file: `t_s,mode,setpoint,valve` and optionally
+    /// `flow_meter`, `pressure_meter`, `link` (1 ok, 0 failed / cut); each row from its time
+    /// on (the first at 0); setpoint in mca (mode 3), l/s (mode 4), % torque (mode 1); valve
+    /// = k2 over the paper's (0.2..5).
+    Control(ControlArgs),
+}
+
+/// Which law(s) `control` runs.
+#[derive(Clone, Copy, Debug, ValueEnum)]
+pub enum ControllerChoice {
+    /// The model-based loop (holding register 14 = 0): feedforward and scheduled PI.
+    Model,
+    /// The PI alone with one gain set (register 14 = 1), as a drive ships it.
+    Pi,
+    /// Both, the same scenario and noise seed, side by side.
+    Both,
+}
+
+/// Options of `pumpbench control` (their documentation is their help text).
+#[derive(Args)]
+pub struct ControlArgs {
+    /// A built-in scenario (pressure-steps, valve-steps, flow-steps, flow-meter-lost,
+    /// link-cut) or a scenario CSV file.
+    #[arg(long)]
+    pub scenario: String,
+    /// The law(s) to run.
+    #[arg(long, value_enum, default_value = "both")]
+    pub controller: ControllerChoice,
+    /// Print the targets beside each figure, with PASS or MISS (a miss is not an
+    /// error: the exit code stays 0).
+    #[arg(long)]
+    pub targets: bool,
+    /// CSV of every control period (5 ms) of every run (stdout is the tables).
+    #[arg(long)]
+    pub output: Option<PathBuf>,
+    /// PNG figure: true pressure and flow against the setpoint, torque reference.
+    #[arg(long)]
+    pub plot: Option<PathBuf>,
+    /// Seed of the plant's noise (the same for every law).
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// How long a scenario file's last row holds, s.
+    #[arg(long, default_value_t = 6.0)]
+    pub hold_s: f64,
+    /// The plant: curve error, water inertia, drive lag, pressure transmitter lag.
+    #[command(flatten)]
+    pub plant: PlantArgs,
+    /// First-order lag of the flow transmitter, ms (0..2000; 0: none). Default: the
+    /// scenario's (flow-steps: 150), else 40.
+    #[arg(long, value_name = "MS", allow_hyphen_values = true)]
+    pub flow_lag_ms: Option<String>,
 }
 
 /// Options of `pumpbench vfd-sim` (their documentation is their help text).
@@ -347,6 +412,28 @@ pub struct BenchDataArgs {
     /// with. E.g. `20:1.3,40:0.7,60:1`.
     #[arg(long, value_name = "T:FACTOR,...", allow_hyphen_values = true)]
     pub valve_steps: Option<String>,
+    /// The plant: curve error, water inertia, drive lag, pressure transmitter lag.
+    #[command(flatten)]
+    pub plant: PlantArgs,
+    /// Add the columns speed_true (rpm), flow_true (l/s), pressure_true (mca) and k2_true
+    /// (√mca/(l/s)) after the readings: the bench's true state at the row's time, before
+    /// transmitter lag, noise and quantisation (shortest round-trip form).
+    #[arg(long)]
+    pub truth: bool,
+    /// First-order lag of the flow transmitter, ms (0..2000; 0: none).
+    #[arg(
+        long,
+        value_name = "MS",
+        default_value = "40",
+        allow_hyphen_values = true
+    )]
+    pub flow_lag_ms: String,
+}
+
+/// The plant's options shared by `bench-data` and `control` (their documentation is their
+/// help text; the flow transmitter's lag is each command's own, its default differs).
+#[derive(Args)]
+pub struct PlantArgs {
     /// Curve error PCT, % (-20..20): the TRUE bench's pump-head curve F_H is the paper's
     /// times (1 + PCT/100) (all ten alpha) and its load-torque curve F_T the paper's times
     /// (1 - PCT/100) (all ten beta). PCT > 0: a stronger pump and a lighter load than the
@@ -378,19 +465,6 @@ pub struct BenchDataArgs {
         allow_hyphen_values = true
     )]
     pub drive_lag_ms: String,
-    /// Add the columns speed_true (rpm), flow_true (l/s), pressure_true (mca) and k2_true
-    /// (√mca/(l/s)) after the readings: the bench's true state at the row's time, before
-    /// transmitter lag, noise and quantisation (shortest round-trip form).
-    #[arg(long)]
-    pub truth: bool,
-    /// First-order lag of the flow transmitter, ms (0..2000; 0: none).
-    #[arg(
-        long,
-        value_name = "MS",
-        default_value = "40",
-        allow_hyphen_values = true
-    )]
-    pub flow_lag_ms: String,
     /// First-order lag of the pressure transmitter, ms (0..2000; 0: none).
     #[arg(
         long,

@@ -3,13 +3,13 @@
 
 use crate::cli::{
     check_optional_output, need_weights, weights_input, BenchDataArgs, ExciteArgs, ExportArgs,
-    IdentifyArgs, Model, ModelChoice, Precision, SimulateArgs, SteadyArgs, StudyArgs, ValidateArgs,
-    VfdSimArgs,
+    IdentifyArgs, Model, ModelChoice, PlantArgs, Precision, SimulateArgs, SteadyArgs, StudyArgs,
+    ValidateArgs, VfdSimArgs,
 };
 use crate::error::Failure;
 use crate::{
-    benchdata, excite, export, input, modelfile, narmaxcmd, num, output, simulate, study, train,
-    vfdsim,
+    benchdata, excite, export, input, modelfile, narmaxcmd, num, output, plant, simulate, study,
+    train, vfdsim,
 };
 
 /// Runs `$body` with `$model` bound to the NARMAX model of file `$m` in precision `$p`.
@@ -168,29 +168,39 @@ pub fn export(a: ExportArgs) -> Result<(), Failure> {
 pub fn bench_data(a: BenchDataArgs) -> Result<(), Failure> {
     // The options first (no file touched), then the output, then the input.
     let options = benchdata::Options {
-        seed: a.seed,
         valve_steps: match a.valve_steps.as_deref() {
             Some(text) => benchdata::parse_valve_steps(text).map_err(Failure::usage)?,
             None => Vec::new(),
         },
-        curve_error: benchdata::parse_curve_error(&a.curve_error).map_err(Failure::usage)?,
-        dynamics: benchdata::Dynamics {
-            water_inertia: benchdata::parse_water_inertia(&a.water_inertia)
-                .map_err(Failure::usage)?,
-            drive_lag_s: benchdata::parse_lag_ms("--drive-lag-ms", &a.drive_lag_ms)
-                .map_err(Failure::usage)?,
-        },
+        plant: plant_options(&a.plant, a.seed, &a.flow_lag_ms)?,
         truth: a.truth,
-        flow_lag_s: benchdata::parse_lag_ms("--flow-lag-ms", &a.flow_lag_ms)
-            .map_err(Failure::usage)?,
-        pressure_lag_s: benchdata::parse_lag_ms("--pressure-lag-ms", &a.pressure_lag_ms)
-            .map_err(Failure::usage)?,
     };
-    benchdata::true_bench(options.curve_error).map_err(Failure::usage)?;
+    plant::true_bench(options.plant.curve_error).map_err(Failure::usage)?;
     check_optional_output(&[("--input", &a.input)], a.output.as_deref())?;
     let data =
         input::read_input_to_integrate(&a.input, benchdata::STEP_MS, benchdata::TOO_MANY_STEPS)?;
     output::write_csv(a.output.as_deref(), |w| benchdata::run(&data, &options, w))
+}
+
+/// The plant of the options shared by `bench-data` and `control`, noise seed `seed`, flow
+/// transmitter lag `flow_lag_ms` (ms, as typed).
+pub fn plant_options(
+    a: &PlantArgs,
+    seed: u64,
+    flow_lag_ms: &str,
+) -> Result<plant::PlantOptions, Failure> {
+    Ok(plant::PlantOptions {
+        seed,
+        curve_error: plant::parse_curve_error(&a.curve_error).map_err(Failure::usage)?,
+        dynamics: plant::Dynamics {
+            water_inertia: plant::parse_water_inertia(&a.water_inertia).map_err(Failure::usage)?,
+            drive_lag_s: plant::parse_lag_ms("--drive-lag-ms", &a.drive_lag_ms)
+                .map_err(Failure::usage)?,
+        },
+        flow_lag_s: plant::parse_lag_ms("--flow-lag-ms", flow_lag_ms).map_err(Failure::usage)?,
+        pressure_lag_s: plant::parse_lag_ms("--pressure-lag-ms", &a.pressure_lag_ms)
+            .map_err(Failure::usage)?,
+    })
 }
 
 /// `pumpbench study`.

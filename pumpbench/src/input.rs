@@ -196,7 +196,7 @@ pub fn read_columns(path: &Path, names: &[&str]) -> Result<NumericColumns, Input
 }
 
 /// The cell `text` of 0-based column `c` (named `name`) on `line`, as a finite number.
-fn finite_cell(
+pub(crate) fn finite_cell(
     path: &Path,
     line: u64,
     c: usize,
@@ -224,7 +224,7 @@ fn finite_cell(
 /// for each record with its 1-based line, the 0-based column of each of `names` then of each
 /// of `optional` (`None` where the header lacks an optional one), and the record. Returns
 /// those columns.
-fn scan_csv(
+pub(crate) fn scan_csv(
     path: &Path,
     names: &[&str],
     optional: &[&str],

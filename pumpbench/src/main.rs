@@ -11,6 +11,7 @@
 mod benchdata;
 mod cli;
 mod commands;
+mod control;
 mod error;
 mod excite;
 mod export;
@@ -20,6 +21,7 @@ mod narmaxcmd;
 mod num;
 mod observe;
 mod output;
+mod plant;
 mod plots;
 mod simulate;
 mod study;
@@ -44,6 +46,7 @@ fn run(command: Command) -> Result<(), Failure> {
         Command::Study(a) => commands::study(a),
         Command::Simulate(a) => commands::simulate(a),
         Command::Steady(a) => commands::steady(a),
+        Command::Control(a) => control::command(a),
     }
 }
 

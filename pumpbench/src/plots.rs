@@ -24,7 +24,7 @@ const MODEL: RGBColor = RGBColor(214, 39, 40);
 const POINTS: RGBColor = RGBColor(31, 119, 180);
 
 /// Registers the embedded font as `sans-serif` (once per process).
-fn font() -> Result<(), Failure> {
+pub(crate) fn font() -> Result<(), Failure> {
     static DONE: OnceLock<bool> = OnceLock::new();
     let ok = *DONE
         .get_or_init(|| register_font(FONT, FontStyle::Normal, ttf_noto_sans::REGULAR).is_ok());

@@ -1,0 +1,425 @@
+//! Unit tests of `control`: the figures on responses whose figures are known in closed form,
+//! the scenarios (built-in and read), a short closed loop on the built-in plant.
+
+use super::*;
+
+/// Times from `t0` to `t_end` every `h` seconds.
+fn times(t0: f64, t_end: f64, h: f64) -> Vec<f64> {
+    let n = ((t_end - t0) / h).round() as usize;
+    (0..n).map(|k| t0 + k as f64 * h).collect()
+}
+
+/// A first-order response from `from` to `to` with time constant `tau` after a step at `t0`.
+fn first_order(t: &[f64], t0: f64, from: f64, to: f64, tau: f64) -> Vec<f64> {
+    t.iter()
+        .map(|&ti| to + (from - to) * (-(ti - t0) / tau).exp())
+        .collect()
+}
+
+/// A first-order step: rise 10-90 % is τ ln 9 (2.197 τ), the 2 % settling time is
+/// τ ln(|step| / (0.02 |to|)) (3.912 τ when the band is 2 % of the step), the IAE
+/// |step| τ (1 − e^(−T/τ)) over a window T, and no overshoot; upward and downward, sampled
+/// every 5 ms (a frame) and every 1 ms.
+#[test]
+fn a_first_order_step_has_its_closed_form_figures() {
+    for (from, to, tau, h) in [
+        (0.0, 2.0, 0.3, 0.005),
+        (2.0, 4.0, 0.25, 0.005),
+        (4.0, 1.0, 0.5, 0.005),
+        (15.0, 8.0, 0.4, 0.001),
+    ] {
+        let (t0, t_end) = (2.0, 2.0 + 12.0 * tau);
+        let t = times(t0, t_end, h);
+        let y = first_order(&t, t0, from, to, tau);
+        let (rise, over, settle, iae_got) = step_figures(&t, &y, t0, from, to, t_end);
+        let step: f64 = to - from;
+        let rise_exact = tau * 9f64.ln();
+        let settle_exact = tau * (step.abs() / (BAND * to.abs())).ln();
+        let window = t_end - t0;
+        let iae_exact = step.abs() * tau * (1.0 - (-window / tau).exp());
+        let case = format!("{from} → {to}, τ {tau}, h {h}");
+        assert!(
+            (rise.unwrap() - rise_exact).abs() < 1e-3,
+            "{case}: rise {rise:?} vs {rise_exact}"
+        );
+        assert!(
+            (settle.unwrap() - settle_exact).abs() < 1e-3,
+            "{case}: settle {settle:?} vs {settle_exact}"
+        );
+        assert_eq!(over, Some(0.0), "{case}");
+        // Trapezoids on an exponential: a relative error of about (h/τ)²/12.
+        assert!(
+            (iae_got / iae_exact - 1.0).abs() < 1e-4,
+            "{case}: IAE {iae_got} vs {iae_exact}"
+        );
+    }
+    // With a band of 2 % of the step (from 0), the settling time is 3.912 τ.
+    let tau = 0.3;
+    let t = times(0.0, 5.0, 0.005);
+    let y = first_order(&t, 0.0, 0.0, 1.0, tau);
+    let (rise, _, settle, _) = step_figures(&t, &y, 0.0, 0.0, 1.0, 5.0);
+    assert!((rise.unwrap() / tau - 2.197).abs() < 0.005, "{rise:?}");
+    assert!((settle.unwrap() / tau - 3.912).abs() < 0.005, "{settle:?}");
+}
+
+/// An underdamped second-order step overshoots by exp(−πζ/√(1−ζ²)).
+#[test]
+fn a_second_order_step_overshoots_by_its_damping() {
+    for zeta in [0.3f64, 0.5, 0.7] {
+        let wn = 8.0;
+        let wd = wn * (1.0 - zeta * zeta).sqrt();
+        let t = times(0.0, 4.0, 0.001);
+        let y: Vec<f64> = t
+            .iter()
+            .map(|&ti| {
+                let e = (-zeta * wn * ti).exp();
+                1.0 + 2.0
+                    * (1.0
+                        - e * ((wd * ti).cos()
+                            + zeta / (1.0 - zeta * zeta).sqrt() * (wd * ti).sin()))
+            })
+            .collect();
+        let (_, over, _, _) = step_figures(&t, &y, 0.0, 1.0, 3.0, 4.0);
+        let exact = 100.0 * (-std::f64::consts::PI * zeta / (1.0 - zeta * zeta).sqrt()).exp();
+        assert!(
+            (over.unwrap() - exact).abs() < 0.01,
+            "ζ {zeta}: {over:?} vs {exact}"
+        );
+    }
+}
+
+#[test]
+fn band_entry_never_out_and_still_out() {
+    let t = times(0.0, 1.0, 0.005);
+    let inside: Vec<f64> = t.iter().map(|_| 3.01).collect();
+    assert_eq!(band_entry(&t, &inside, 3.0, 0.06, 0.0), Some(0.0));
+    let outside: Vec<f64> = t.iter().map(|&ti| 3.0 + 0.1 * (1.0 + ti)).collect();
+    assert_eq!(band_entry(&t, &outside, 3.0, 0.06, 0.0), None);
+    // Out, then in, then out once more and back: the last exit counts.
+    let y: Vec<f64> = t
+        .iter()
+        .map(|&ti| {
+            if ti < 0.2 || (0.5..0.6).contains(&ti) {
+                3.5
+            } else {
+                3.0
+            }
+        })
+        .collect();
+    let back = band_entry(&t, &y, 3.0, 0.06, 0.0).unwrap();
+    assert!(back > 0.595 && back < 0.6, "{back}");
+    // A NaN is never inside the band.
+    let mut bad = inside.clone();
+    *bad.last_mut().unwrap() = f64::NAN;
+    assert_eq!(band_entry(&t, &bad, 3.0, 0.06, 0.0), None);
+}
+
+/// A trace of one law from samples `(t, pressure_true, flow_true)`.
+fn trace_of(samples: &[(f64, usize, u16, f64, f64)]) -> Trace {
+    Trace {
+        law: Law::Model,
+        samples: samples
+            .iter()
+            .map(|&(t_s, row, mode, p, q)| Sample {
+                t_s,
+                row,
+                mode,
+                truth: Some(Truth {
+                    speed_rpm: 1500.0,
+                    flow_lps: q,
+                    pressure_mca: p,
+                    valve_k2: 0.1,
+                    torque_pct: 50.0,
+                }),
+                published: Default::default(),
+                torque_ref_pct: 50.0,
+            })
+            .collect(),
+        nan_steps: 0,
+        out_of_limits: 0,
+        max_rate_pct_per_s: 0.0,
+        rate_limit_pct_per_s: 200.0,
+    }
+}
+
+/// The figures of a valve step: the peak deviation in % of the setpoint, the time back within
+/// 2 %, the steady error over the row's last second; the controlled value is the row's mode's.
+#[test]
+fn figures_of_a_disturbance_and_of_a_step_on_the_truth() {
+    let ok = SensorState::OK;
+    let row = |t_s, mode, setpoint, valve| Row {
+        t_s,
+        mode,
+        setpoint,
+        valve,
+        sensors: ok,
+    };
+    let scenario = Scenario {
+        name: "synthetic".into(),
+        rows: vec![
+            row(0.0, 3, 3.0, 1.0),
+            row(2.0, 3, 3.0, 1.3),
+            row(6.0, 4, 12.0, 1.3),
+        ],
+        end_s: 9.0,
+        flow_lag_ms: None,
+    };
+    let tau = 0.2;
+    let mut s = vec![];
+    for k in -200..1800 {
+        let t = k as f64 * 0.005;
+        let (row, mode) = if t < 2.0 {
+            (0, 3)
+        } else if t < 6.0 {
+            (1, 3)
+        } else {
+            (2, 4)
+        };
+        // The valve step: the pressure jumps by 60 % and decays with τ to 0.5 % above.
+        let p = if row == 1 {
+            3.015 + 1.8 * (-(t - 2.0) / tau).exp()
+        } else {
+            3.0
+        };
+        // Flow: 1 % below its setpoint in row 2 (a steady error).
+        let q = if row == 2 { 11.88 } else { 14.0 };
+        s.push((t, row, mode, p, q));
+    }
+    let f = figures(&trace_of(&s), &scenario);
+    assert_eq!(f.len(), 3);
+    assert_eq!(f[0].kind, EventKind::Other("start".into()));
+    assert_eq!(f[0].steady_error_pct, Some(0.0));
+    assert_eq!(f[1].kind, EventKind::Disturbance("valve ×1.3".into()));
+    let peak = f[1].peak_pct.unwrap();
+    assert!((peak - (1.815 / 3.0 * 100.0)).abs() < 1e-9, "{peak}");
+    // Back within 2 % (0.06 mca): 0.015 + 1.8 e^(−t/τ) = 0.06.
+    let back = tau * (1.8f64 / 0.045).ln();
+    assert!(
+        (f[1].settle_s.unwrap() - back).abs() < 1e-3,
+        "{:?} vs {back}",
+        f[1].settle_s
+    );
+    // (0.5 %, and what is left of the decay after 3 s: 1.8 e^(−15) / 3, under 2e-5 %.)
+    assert!((f[1].steady_error_pct.unwrap() - 0.5).abs() < 2e-5);
+    assert_eq!(f[2].kind, EventKind::Other("mode 3 → 4".into()));
+    assert!((f[2].steady_error_pct.unwrap() + 1.0).abs() < 1e-9);
+    // The targets: a valve step holding a pressure, back within 1 s.
+    assert_eq!(
+        targets(&f[1]),
+        [Limit {
+            figure: "settle",
+            limit: 1.0
+        }]
+    );
+}
+
+#[test]
+fn the_issue_targets_by_mode_kind_and_direction() {
+    let mut f = EventFigures {
+        t_s: 1.0,
+        mode: 3,
+        setpoint: 4.0,
+        kind: EventKind::Step { from: 2.0, to: 4.0 },
+        sensors: SensorState::OK,
+        rise_s: None,
+        overshoot_pct: None,
+        peak_pct: None,
+        settle_s: None,
+        iae: None,
+        steady_error_pct: None,
+    };
+    let limit = |f: &EventFigures, name: &str| {
+        targets(f)
+            .iter()
+            .find(|l| l.figure == name)
+            .map(|l| l.limit)
+    };
+    assert_eq!(limit(&f, "rise"), Some(0.5));
+    assert_eq!(limit(&f, "settle"), Some(1.0));
+    assert_eq!(limit(&f, "iae"), Some(1.0));
+    f.kind = EventKind::Step { from: 4.0, to: 1.0 };
+    assert_eq!(limit(&f, "rise"), Some(0.8));
+    assert_eq!(limit(&f, "settle"), Some(2.5));
+    assert_eq!(limit(&f, "iae"), Some(1.8));
+    f.mode = 4;
+    assert_eq!(limit(&f, "settle"), Some(3.0));
+    assert_eq!(limit(&f, "overshoot"), Some(10.0));
+    f.kind = EventKind::Disturbance("valve ×0.7".into());
+    assert_eq!(limit(&f, "peak"), Some(7.0));
+    f.sensors.flow_meter = false;
+    assert_eq!(
+        targets(&f),
+        [Limit {
+            figure: "steady",
+            limit: 2.0
+        }]
+    );
+    f.kind = EventKind::Disturbance("VFD link cut".into());
+    f.mode = 3;
+    assert!(targets(&f).is_empty());
+}
+
+#[test]
+fn the_built_in_scenarios_are_well_formed() {
+    for name in BUILT_IN {
+        let s = built_in(name).unwrap();
+        assert_eq!(s.name, name);
+        assert_eq!(s.rows[0].t_s, 0.0, "{name}");
+        assert!(s.rows.windows(2).all(|w| w[1].t_s > w[0].t_s), "{name}");
+        assert!(s.end_s > s.rows.last().unwrap().t_s, "{name}");
+        for r in &s.rows {
+            assert!(matches!(r.mode, 3 | 4), "{name}");
+            let (max, _) = setpoint_range(r.mode).unwrap();
+            assert!((0.0..=max).contains(&r.setpoint), "{name}");
+            assert!(
+                (VALVE_FACTOR_MIN..=VALVE_FACTOR_MAX).contains(&r.valve),
+                "{name}"
+            );
+        }
+    }
+    assert_eq!(built_in("flow-steps").unwrap().flow_lag_ms, Some(150.0));
+    assert!(built_in("nope").is_none());
+}
+
+/// `text` written to a temporary scenario file and read.
+fn read(text: &str) -> Result<Scenario, InputError> {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("s.csv");
+    std::fs::write(&p, text).unwrap();
+    read_scenario(&p, 4.0)
+}
+
+#[test]
+fn a_scenario_file_is_read_with_its_optional_columns() {
+    let s = read("t_s,mode,setpoint,valve,link,flow_meter\n0,3,2.5,1,1,1\n1.5,4,12,1.3,0,0\n2,1,40,1,1,1\n3,0,,1,1,1\n").unwrap();
+    assert_eq!(s.rows.len(), 4);
+    assert_eq!(s.end_s, 7.0);
+    assert_eq!(s.rows[1].mode, 4);
+    assert_eq!(s.rows[1].setpoint, 12.0);
+    assert_eq!(s.rows[1].valve, 1.3);
+    assert_eq!(
+        s.rows[1].sensors,
+        SensorState {
+            pressure_meter: true,
+            flow_meter: false,
+            link: false
+        }
+    );
+    assert_eq!(s.rows[1].setpoint_write(), Some((REG_FLOW, 1200)));
+    assert_eq!(s.rows[0].setpoint_write(), Some((REG_PRESSURE, 2500)));
+    assert_eq!(s.rows[2].setpoint_write(), Some((REG_TORQUE, 4000)));
+    assert_eq!(s.rows[3].setpoint_write(), None);
+}
+
+#[test]
+fn bad_scenario_rows_name_their_line_and_column() {
+    let head = "t_s,mode,setpoint,valve\n";
+    for (rows, expected) in [
+        ("0,3,2,1\n1,7,2,1\n", ":3:2 (mode): unknown mode 7"),
+        ("0,3,2,1\n1,3.5,2,1\n", ":3:2 (mode): unknown mode 3.5"),
+        (
+            "0,3,70,1\n",
+            ":2:3 (setpoint): setpoint 70 mca is outside mode 3's register range 0..65.535",
+        ),
+        ("0,4,-1,1\n", ":2:3 (setpoint): setpoint -1 l/s is outside"),
+        ("0,1,101,1\n", ":2:3 (setpoint): setpoint 101 % is outside"),
+        (
+            "0,3,2,1\n2,3,3,1\n2,3,4,1\n",
+            ":4:1 (t_s): time 2 s is not after the previous row's 2 s",
+        ),
+        (
+            "0,3,2,1\n3,3,3,1\n2,3,4,1\n",
+            ":4:1 (t_s): time 2 s is not after",
+        ),
+        (
+            "0,3,NaN,1\n",
+            ":2:3 (setpoint): 'NaN' is not a finite number",
+        ),
+        ("0,3,2,inf\n", ":2:4 (valve): 'inf' is not a finite number"),
+        ("0,3,2,x\n", ":2:4 (valve): 'x' is not a number"),
+        (
+            "0,3,2,6\n",
+            ":2:4 (valve): valve factor 6 is outside 0.2..5",
+        ),
+        (
+            "0.5,3,2,1\n",
+            ":2:1 (t_s): the first row's time is 0.5 s: it must be 0",
+        ),
+        (
+            "0,3,,1\n",
+            ":2:3 (setpoint): empty: mode 3 needs a setpoint",
+        ),
+        (
+            "0,3,2,1\n5000,3,2,1\n",
+            ":3:1 (t_s): time 5000 s is beyond the longest scenario",
+        ),
+    ] {
+        let e = read(&format!("{head}{rows}")).unwrap_err().to_string();
+        assert!(e.contains(expected), "{rows:?}: {e}");
+        assert_eq!(e.lines().count(), 1);
+    }
+    let e = read("t_s,mode,setpoint,valve,link\n0,3,2,1,2\n")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains(":2:5 (link): 2 is not 0 or 1"), "{e}");
+    let e = read("t_s,mode,valve\n0,3,1\n").unwrap_err().to_string();
+    assert!(e.contains("missing column 'setpoint'"), "{e}");
+}
+
+/// A short closed loop on the built-in plant: a pressure step of 2 → 3 mca; the torque never
+/// NaN nor outside 0..=100 %, the rate never above the default 200 %/s, and both laws end
+/// within 2 % of the setpoint.
+#[test]
+fn a_short_pressure_loop_on_the_built_in_plant_settles() {
+    let ok = SensorState::OK;
+    let scenario = Scenario {
+        name: "short".into(),
+        rows: vec![
+            Row {
+                t_s: 0.0,
+                mode: 3,
+                setpoint: 2.0,
+                valve: 1.0,
+                sensors: ok,
+            },
+            Row {
+                t_s: 0.5,
+                mode: 3,
+                setpoint: 3.0,
+                valve: 1.0,
+                sensors: ok,
+            },
+        ],
+        end_s: 3.0,
+        flow_lag_ms: None,
+    };
+    for law in [Law::Model, Law::Pi] {
+        let (mut plant, u0) = built_in_plant(&PlantOptions::with_seed(5), &scenario).unwrap();
+        assert!(u0 > 0.0 && u0 < 100.0, "{u0}");
+        let trace = run(&mut plant, &scenario, law, u0, || {}).unwrap();
+        assert_eq!((trace.nan_steps, trace.out_of_limits), (0, 0), "{law:?}");
+        // The default rate limit (register 12: 200 %/s), up to the f32 rounding of a period's
+        // 1 % change.
+        assert_eq!(trace.rate_limit_pct_per_s, 200.0);
+        assert!(
+            trace.max_rate_pct_per_s <= 200.0 * (1.0 + 1e-4),
+            "{law:?}: {}",
+            trace.max_rate_pct_per_s
+        );
+        assert!(trace
+            .samples
+            .iter()
+            .all(|s| (0.0..=100.0).contains(&s.torque_ref_pct)));
+        let last = trace.samples.last().unwrap();
+        let p = last.truth.unwrap().pressure_mca;
+        assert!((p - 3.0).abs() <= 0.02 * 3.0, "{law:?}: {p}");
+        // Before the step the loop held 2 mca (the settled start).
+        let before = trace.samples.iter().rfind(|s| s.t_s < 0.5).unwrap();
+        assert!((before.truth.unwrap().pressure_mca - 2.0).abs() <= 0.04);
+        let f = figures(&trace, &scenario);
+        assert!(
+            f[1].settle_s.is_some() && f[1].rise_s.is_some(),
+            "{law:?}: {f:?}"
+        );
+    }
+}

@@ -1,0 +1,837 @@
+//! The physical bench that `bench-data` records and `pumpbench control` closes its loop around:
+//! the paper's white-box model in f64 (RK4 at ≤ 1 ms) plus what a real bench adds between the
+//! physics and the controller's inputs, as a stepping API ([`Plant`]).
+//!
+//! What is added (constants below, per signal):
+//! - a first-order transmitter lag (pressure 20 ms; flow 40 ms, a transmitter that settles in
+//!   about 100 ms as the paper's does; speed none), settable per plant ([`PlantOptions`]);
+//! - noise (pressure 0.003 mca, flow 0.02 l/s, speed 0.5 rpm, 1 σ), the controller's
+//!   transmitter noise ([`controller::analog::noise`]: a sum of four uniform draws, bounded
+//!   at ±3.46 σ);
+//! - the 4-20 mA loop and its ADC, the model the controller and its virtual bench use
+//!   ([`controller::analog`]): a transmitter span of 0..10 mca (pressure) and 0..30 l/s
+//!   (flow), saturated at NAMUR NE 43's measuring range 3.8..20.5 mA (−0.125..10.3125 mca,
+//!   −0.375..30.9375 l/s), read through a 150 Ω shunt by a 12-bit 3.3 V ADC (0..22 mA in 4096
+//!   codes): one code is 3.4 mm of water and 0.010 l/s.
+//!
+//! Two dynamics the paper's model lacks can be added ([`Dynamics`]; both 0 by default):
+//! - water-column inertia (mca·s²/l): the flow is a state,
+//!   `L dQ/dt = F_H(ω, Q) − (k1 + k2²) Q² + c`, the head the pump makes beyond what the pipe,
+//!   the valve and the static head take accelerating the water column (for a pipe of length
+//!   ℓ m and section A m², L = ℓ / (g A) / 1000: 10 m of 50 mm pipe is 0.52);
+//! - the drive's torque loop: the electromagnetic torque follows Te(u) (eq. 4) through a
+//!   first-order lag.
+//!
+//! The bench can differ from the paper's model: its valve coefficient k2 set to a factor of
+//! the paper's 0.1082 √mca/(l/s) at any time ([`Plant::set_valve_factor`]), and a curve error
+//! ([`CurveError`], [`true_bench`]): the true pump-head curve F_H (eq. 5, all ten α) and the
+//! true load-torque curve F_T (eq. 6, all ten β) are the paper's times their own factors.
+//!
+//! For a controller in the loop ([`Plant::frame`]) the plant shows the two transmitters' ADC
+//! codes (a failed transmitter reads [`FAULT_MA`], an NE 43 fault) and the drive's readings
+//! (speed through the speed channel's noise, the electromagnetic torque it delivers, status
+//! word 0), or no drive readings while the VFD link is cut ([`SensorState`]).
+//!
+//! Not modelled: transmitter drift and offsets, VFD torque ripple.
+
+use crate::input::shown;
+use crate::num::Short;
+use controller::analog::{self, LoopConfig, FLOW_LOOP, PRESSURE_LOOP};
+use controller::plant::PlantFrame;
+use controller::vfd::VfdReadings;
+use model_core::equations::{
+    electromagnetic_torque_pct, load_torque_pct, speed_derivative_rpm_per_s, valve_pressure_mca,
+};
+use model_core::excitation::SplitMix64;
+use model_core::transmitter::lag_to;
+use model_core::{BenchParams, BenchState, Scheme, WhiteBox, MAX_STEP_S};
+
+/// Transmitter model of one signal.
+#[derive(Debug, Clone, Copy)]
+pub struct Transmitter {
+    /// First-order time constant, s (0: none).
+    pub tau_s: f64,
+    /// Noise standard deviation, signal units.
+    pub noise: f64,
+    /// The 4-20 mA loop (span, shunt, ADC) that carries the reading; `None`: not quantised.
+    pub adc: Option<LoopConfig>,
+}
+
+/// Pressure transmitter: 20 ms lag, 3 mm water noise, 0..10 mca ([`PRESSURE_LOOP`]).
+pub const PRESSURE: Transmitter = Transmitter {
+    tau_s: 0.020,
+    noise: 0.003,
+    adc: Some(PRESSURE_LOOP),
+};
+/// Flow transmitter: 40 ms lag, 0.02 l/s noise, 0..30 l/s ([`FLOW_LOOP`]).
+pub const FLOW: Transmitter = Transmitter {
+    tau_s: 0.040,
+    noise: 0.02,
+    adc: Some(FLOW_LOOP),
+};
+/// Speed (encoder used during identification only): no lag, 0.5 rpm noise, not quantised.
+pub const SPEED: Transmitter = Transmitter {
+    tau_s: 0.0,
+    noise: 0.5,
+    adc: None,
+};
+
+impl Transmitter {
+    /// The lagged value with this transmitter's noise (one draw of `rng`).
+    fn noisy(&self, lagged: f64, rng: &mut SplitMix64) -> f64 {
+        lagged + self.noise * f64::from(analog::noise(rng))
+    }
+
+    /// Reading: noise added to the lagged value, then the 4-20 mA transmitter and the ADC
+    /// ([`controller::analog`], in f32 as on the board), the code's current read back on the
+    /// span's line.
+    pub(crate) fn read(&self, lagged: f64, rng: &mut SplitMix64) -> f64 {
+        let noisy = self.noisy(lagged, rng);
+        match &self.adc {
+            None => noisy,
+            Some(l) => f64::from(l.value_unclamped(l.current_ma(adc_code(l, noisy)))),
+        }
+    }
+
+    /// Advances the lag state `x` toward `target` over `h` seconds (the transmitter's lag,
+    /// [`analog::lag_exact`]: exact for a held target).
+    fn lag(&self, x: &mut f64, target: f64, h: f64) {
+        analog::lag_exact(x, target, h, self.tau_s);
+    }
+}
+
+/// The ADC code of a transmitter on loop `l` showing `value` (its span's unit): the 4-20 mA
+/// current saturated at NE 43's measuring range, then the shunt and the ADC, in f32 as on the
+/// board.
+fn adc_code(l: &LoopConfig, value: f64) -> u16 {
+    l.code(l.transmitter_ma(value as f32))
+}
+
+/// The loop current of a failed transmitter, mA (NE 43: below 3.6 mA, a broken wire).
+pub const FAULT_MA: f32 = 2.0;
+
+/// Largest RK4 step of the bench, ms (each interval between input rows is split into equal
+/// steps no longer than this; a shorter interval is one step of its length).
+pub const STEP_MS: f64 = 1.0;
+
+/// Smallest valve factor accepted.
+pub const VALVE_FACTOR_MIN: f64 = 0.2;
+/// Largest valve factor accepted.
+pub const VALVE_FACTOR_MAX: f64 = 5.0;
+/// Largest |curve error| accepted, %.
+pub const CURVE_ERROR_MAX_PCT: f64 = 20.0;
+/// Longest transmitter lag accepted, ms.
+pub const LAG_MAX_MS: f64 = 2000.0;
+/// Smallest non-zero water inertia accepted, mca·s²/l (below it the flow's time constant is
+/// under 0.1 ms at the steepest flow balance, and 1 ms steps would need too many sub-steps).
+pub const INERTIA_MIN: f64 = 1e-3;
+/// Largest water inertia accepted, mca·s²/l.
+pub const INERTIA_MAX: f64 = 10.0;
+
+/// A curve error: the true curves are the paper's times `1 + pct/100`, each on its own.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CurveError {
+    /// Pump head F_H (eq. 5, all ten α), %.
+    pub head_pct: f64,
+    /// Load torque F_T (eq. 6, all ten β), %.
+    pub torque_pct: f64,
+}
+
+impl CurveError {
+    /// The paper's curves.
+    pub const NONE: Self = Self {
+        head_pct: 0.0,
+        torque_pct: 0.0,
+    };
+}
+
+/// Dynamics the paper's model lacks (0: not there).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Dynamics {
+    /// Water-column inertia L, mca·s²/l: `L dQ/dt` is the head left over from the flow
+    /// balance (0, or [`INERTIA_MIN`]..=[`INERTIA_MAX`]).
+    pub water_inertia: f64,
+    /// First-order lag of the drive's torque loop, s (0..=2 s).
+    pub drive_lag_s: f64,
+}
+
+impl Dynamics {
+    /// The paper's model: flow algebraic, torque at once.
+    pub const NONE: Self = Self {
+        water_inertia: 0.0,
+        drive_lag_s: 0.0,
+    };
+}
+
+/// `text` as a finite number, or a one-line message naming `option`.
+fn finite(option: &str, text: &str) -> Result<f64, String> {
+    let t = text.trim();
+    match t.parse::<f64>() {
+        Ok(v) if v.is_finite() => Ok(v),
+        Ok(_) => Err(format!("{option} '{}': not a finite number", shown(t))),
+        Err(_) => Err(format!("{option} '{}': not a number", shown(t))),
+    }
+}
+
+/// Parses `--curve-error PCT` (head +PCT, load torque −PCT) or `--curve-error H,T` (head H,
+/// load torque T): each finite, |·| ≤ [`CURVE_ERROR_MAX_PCT`].
+pub fn parse_curve_error(text: &str) -> Result<CurveError, String> {
+    let one = |t: &str| -> Result<f64, String> {
+        let pct = finite("--curve-error", t)?;
+        if pct.abs() <= CURVE_ERROR_MAX_PCT {
+            Ok(pct)
+        } else {
+            Err(format!(
+                "--curve-error {}: must be within -{m}..{m} %",
+                Short(pct),
+                m = Short(CURVE_ERROR_MAX_PCT)
+            ))
+        }
+    };
+    match text.split_once(',') {
+        None => {
+            let pct = one(text)?;
+            Ok(CurveError {
+                head_pct: pct,
+                torque_pct: -pct,
+            })
+        }
+        Some((h, t)) if !t.contains(',') => Ok(CurveError {
+            head_pct: one(h)?,
+            torque_pct: one(t)?,
+        }),
+        Some(_) => Err(format!(
+            "--curve-error '{}': expected PCT or HEAD_PCT,TORQUE_PCT",
+            shown(text)
+        )),
+    }
+}
+
+/// Parses `--water-inertia L` (mca·s²/l): 0, or finite within
+/// [`INERTIA_MIN`]..=[`INERTIA_MAX`].
+pub fn parse_water_inertia(text: &str) -> Result<f64, String> {
+    let l = finite("--water-inertia", text)?;
+    if l == 0.0 || (INERTIA_MIN..=INERTIA_MAX).contains(&l) {
+        Ok(l.abs())
+    } else {
+        Err(format!(
+            "--water-inertia {}: must be 0 or within {}..{} mca·s²/l",
+            Short(l),
+            Short(INERTIA_MIN),
+            Short(INERTIA_MAX)
+        ))
+    }
+}
+
+/// Parses a transmitter lag in ms (`option` names it in the message): finite, within
+/// 0..=[`LAG_MAX_MS`]. Returns seconds.
+pub fn parse_lag_ms(option: &str, text: &str) -> Result<f64, String> {
+    let ms = finite(option, text)?;
+    if (0.0..=LAG_MAX_MS).contains(&ms) {
+        // A division, so 40 ms is exactly the 0.040 s of the default.
+        Ok(ms / 1000.0)
+    } else {
+        // The limit in plain notation (Short would write 2e3).
+        Err(format!(
+            "{option} {}: must be within 0..{LAG_MAX_MS} ms",
+            Short(ms)
+        ))
+    }
+}
+
+/// The true bench for a curve error: the paper's parameters with every α (pump head F_H,
+/// eq. 5) times (1 + head_pct/100) and every β (load torque F_T, eq. 6) times
+/// (1 + torque_pct/100). [`CurveError::NONE`] gives the paper's bench exactly. The message
+/// (one line) says why the parameters are refused.
+pub fn true_bench(e: CurveError) -> Result<WhiteBox<f64>, String> {
+    let mut p = BenchParams::<f64>::paper();
+    let head = 1.0 + e.head_pct / 100.0;
+    let load = 1.0 + e.torque_pct / 100.0;
+    p.alpha.iter_mut().for_each(|a| *a *= head);
+    p.beta.iter_mut().for_each(|b| *b *= load);
+    WhiteBox::new(p).map_err(|err| {
+        format!(
+            "--curve-error {},{}: the scaled pump-head and load-torque curves are refused: {err}",
+            Short(e.head_pct),
+            Short(e.torque_pct)
+        )
+    })
+}
+
+/// The bench with the dynamics the paper's model lacks ([`Dynamics`]): speed, flow (a state
+/// when there is water inertia, else the flow balance's root) and the electromagnetic torque
+/// the drive delivers (lagged when the drive has a lag).
+#[derive(Debug, Clone, Copy)]
+struct Rich {
+    speed_rpm: f64,
+    flow_lps: f64,
+    te_pct: f64,
+}
+
+/// Most RK4 sub-steps in one step of the rich bench (the flow's time constant sets them).
+const RICH_MAX_SUBSTEPS: f64 = 1000.0;
+
+impl Rich {
+    /// At the white-box bench's (steady) `state`, the drive delivering Te(u) for its torque.
+    fn at(bench: &WhiteBox<f64>, state: &BenchState<f64>) -> Self {
+        let s = bench.signals(state);
+        Rich {
+            speed_rpm: s.speed_rpm,
+            flow_lps: s.flow_lps,
+            te_pct: s.electromagnetic_torque_pct,
+        }
+    }
+
+    /// dω/dt (rpm/s) and dQ/dt (l/s², 0 without inertia) at speed `w`, flow `q`, delivered
+    /// torque `te`.
+    fn rates(bench: &WhiteBox<f64>, d: &Dynamics, w: f64, q: f64, te: f64) -> (f64, f64) {
+        let p = bench.params();
+        let dw = speed_derivative_rpm_per_s(
+            te,
+            load_torque_pct(&p.beta, w, q),
+            bench.accel_rpm_per_s_per_pct(),
+        );
+        let dq = if d.water_inertia > 0.0 {
+            bench.balance(w).eval(q) / d.water_inertia
+        } else {
+            0.0
+        };
+        (dw, dq)
+    }
+
+    /// Advances by `h` seconds with the torque reference `u` held: the drive's lag exactly
+    /// (its target Te(u) is constant over the step), speed and flow by RK4 in equal sub-steps,
+    /// as many as keep a sub-step under half the flow's time constant `L / |∂g/∂Q|`. Without
+    /// inertia the flow is the flow balance's root at each stage (as in the white-box bench).
+    /// Its own RK4, not `WhiteBox::step`: the state here is speed *and* flow (the water
+    /// column) with a drive torque that moves within the step, which the white-box's one-state
+    /// step with the torque held does not integrate; it calls the same equations.
+    fn advance(&mut self, bench: &WhiteBox<f64>, d: &Dynamics, u: f64, h: f64) {
+        let target = electromagnetic_torque_pct(&bench.params().gamma, u);
+        let te0 = self.te_pct;
+        let te_at = |t: f64| lag_to(te0, target, t, d.drive_lag_s);
+        let n = if d.water_inertia > 0.0 {
+            let slope = bench.balance(self.speed_rpm).slope(self.flow_lps).abs();
+            (h * slope / d.water_inertia / 0.5)
+                .ceil()
+                .clamp(1.0, RICH_MAX_SUBSTEPS)
+        } else {
+            1.0
+        };
+        let hs = h / n;
+        let inertial = d.water_inertia > 0.0;
+        let flow = |w: f64, q: f64| if inertial { q } else { bench.flow_at(w, q) };
+        for k in 0..n as u32 {
+            let t0 = f64::from(k) * hs;
+            let (w, q) = (self.speed_rpm, self.flow_lps);
+            let f = |w: f64, q: f64, t: f64| {
+                let q = flow(w.max(0.0), q);
+                let (dw, dq) = Self::rates(bench, d, w.max(0.0), q, te_at(t));
+                (dw, dq, q)
+            };
+            let (k1w, k1q, q1) = f(w, q, t0);
+            let (k2w, k2q, q2) = f(w + hs / 2.0 * k1w, q1 + hs / 2.0 * k1q, t0 + hs / 2.0);
+            let (k3w, k3q, q3) = f(w + hs / 2.0 * k2w, q2 + hs / 2.0 * k2q, t0 + hs / 2.0);
+            let (k4w, k4q, _) = f(w + hs * k3w, q3 + hs * k3q, t0 + hs);
+            self.speed_rpm = (w + hs / 6.0 * (k1w + 2.0 * k2w + 2.0 * k3w + k4w)).max(0.0);
+            let q_end = q1 + hs / 6.0 * (k1q + 2.0 * k2q + 2.0 * k3q + k4q);
+            // No backflow: the pump's check valve.
+            self.flow_lps = flow(self.speed_rpm, q_end).max(0.0);
+        }
+        self.te_pct = te_at(h);
+    }
+}
+
+/// The plant's options: how it differs from the paper's model, its transmitters, its noise.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlantOptions {
+    /// Seed of the noise.
+    pub seed: u64,
+    /// Curve error (see [`true_bench`]).
+    pub curve_error: CurveError,
+    /// Water inertia and drive lag.
+    pub dynamics: Dynamics,
+    /// Flow transmitter lag, s.
+    pub flow_lag_s: f64,
+    /// Pressure transmitter lag, s.
+    pub pressure_lag_s: f64,
+}
+
+impl PlantOptions {
+    /// The paper's bench, the default transmitter lags ([`PRESSURE`], [`FLOW`]), noise seed
+    /// `seed`.
+    pub fn with_seed(seed: u64) -> Self {
+        PlantOptions {
+            seed,
+            curve_error: CurveError::NONE,
+            dynamics: Dynamics::NONE,
+            flow_lag_s: FLOW.tau_s,
+            pressure_lag_s: PRESSURE.tau_s,
+        }
+    }
+}
+
+/// Why the plant cannot go on.
+#[derive(Debug, Clone, PartialEq)]
+pub enum PlantError {
+    /// Its options are refused (a bad command line: the message names the option).
+    Options(String),
+    /// The white-box model refused a step or a state (its message).
+    Model(String),
+    /// Speed or flow became NaN or infinite.
+    Diverged,
+}
+
+impl std::fmt::Display for PlantError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            PlantError::Options(m) => write!(f, "{m}"),
+            PlantError::Model(m) => write!(f, "model: {m}"),
+            PlantError::Diverged => write!(f, "model: the bench diverged"),
+        }
+    }
+}
+
+/// The plant's true state now (no lag, no noise, no quantisation).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Truth {
+    /// Speed, rpm.
+    pub speed_rpm: f64,
+    /// Flow, l/s.
+    pub flow_lps: f64,
+    /// Outlet pressure, mca.
+    pub pressure_mca: f64,
+    /// Valve coefficient k2, √mca/(l/s).
+    pub valve_k2: f64,
+    /// Electromagnetic torque the drive delivers, % of nominal.
+    pub torque_pct: f64,
+}
+
+/// Which of the plant's signals reach the controller ([`Plant::frame`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SensorState {
+    /// The pressure transmitter works (else its loop reads [`FAULT_MA`]).
+    pub pressure_meter: bool,
+    /// The flow transmitter works (else its loop reads [`FAULT_MA`]).
+    pub flow_meter: bool,
+    /// The VFD link is up (else the frame has no drive readings).
+    pub link: bool,
+}
+
+impl SensorState {
+    /// Everything works.
+    pub const OK: Self = Self {
+        pressure_meter: true,
+        flow_meter: true,
+        link: true,
+    };
+}
+
+/// The physical bench, stepped by its caller: the white-box bench (with the [`Dynamics`] when
+/// there are any), the transmitters' lags, their noise and ADCs.
+#[derive(Debug, Clone)]
+pub struct Plant {
+    bench: WhiteBox<f64>,
+    nominal_k2: f64,
+    static_head_c_mca: f64,
+    state: BenchState<f64>,
+    /// With inertia or a drive lag the rich bench carries the state; without, the white-box
+    /// bench alone.
+    rich: Option<Rich>,
+    dynamics: Dynamics,
+    pressure: Transmitter,
+    flow: Transmitter,
+    /// The transmitters' lagged values: speed, flow, pressure.
+    seen: (f64, f64, f64),
+    rng: SplitMix64,
+    sensors: SensorState,
+}
+
+impl Plant {
+    /// The plant of `o` with its valve at `valve_factor` times the paper's k2, at the steady
+    /// state of the torque reference `torque_ref_pct` (0..=100 %), the transmitters settled
+    /// there, all sensors working.
+    pub fn new(
+        o: &PlantOptions,
+        valve_factor: f64,
+        torque_ref_pct: f64,
+    ) -> Result<Self, PlantError> {
+        let bench = true_bench(o.curve_error).map_err(PlantError::Options)?;
+        let nominal_k2 = bench.params().valve_k2;
+        let static_head_c_mca = bench.params().static_head_c_mca;
+        let mut plant = Plant {
+            bench,
+            nominal_k2,
+            static_head_c_mca,
+            state: BenchState::at_rest(),
+            rich: None,
+            dynamics: o.dynamics,
+            pressure: Transmitter {
+                tau_s: o.pressure_lag_s,
+                ..PRESSURE
+            },
+            flow: Transmitter {
+                tau_s: o.flow_lag_s,
+                ..FLOW
+            },
+            seen: (0.0, 0.0, 0.0),
+            rng: SplitMix64::new(o.seed),
+            sensors: SensorState::OK,
+        };
+        plant.set_valve_factor(valve_factor)?;
+        plant.state = plant
+            .bench
+            .steady_state(torque_ref_pct)
+            .map_err(|e| PlantError::Model(e.to_string()))?;
+        plant.rich = (o.dynamics != Dynamics::NONE).then(|| Rich::at(&plant.bench, &plant.state));
+        plant.seen = plant.now();
+        Ok(plant)
+    }
+
+    /// Sets the valve: k2 is `factor` ([`VALVE_FACTOR_MIN`]..=[`VALVE_FACTOR_MAX`]) times the
+    /// paper's, the static head unchanged. The flow and pressure change at once (with water
+    /// inertia the flow follows through it); the readings through their lags.
+    pub fn set_valve_factor(&mut self, factor: f64) -> Result<(), PlantError> {
+        if !(VALVE_FACTOR_MIN..=VALVE_FACTOR_MAX).contains(&factor) {
+            return Err(PlantError::Options(format!(
+                "valve factor {} is outside {}..{}",
+                Short(factor),
+                Short(VALVE_FACTOR_MIN),
+                Short(VALVE_FACTOR_MAX)
+            )));
+        }
+        self.bench
+            .set_load(self.nominal_k2 * factor, self.static_head_c_mca)
+            .map_err(|e| PlantError::Model(e.to_string()))
+    }
+
+    /// Sets which signals reach the controller from now on.
+    pub fn set_sensors(&mut self, s: SensorState) {
+        self.sensors = s;
+    }
+
+    /// Speed, flow and pressure now.
+    fn now(&self) -> (f64, f64, f64) {
+        match &self.rich {
+            Some(r) => {
+                let par = self.bench.params();
+                let q = r.flow_lps;
+                (
+                    r.speed_rpm,
+                    q,
+                    valve_pressure_mca(par.valve_k2, par.static_head_c_mca, q),
+                )
+            }
+            None => {
+                let sig = self.bench.signals(&self.state);
+                (sig.speed_rpm, sig.flow_lps, sig.pressure_mca)
+            }
+        }
+    }
+
+    /// Advances by `h_s` seconds (at most [`STEP_MS`]) with the torque reference
+    /// `torque_ref_pct` (0..=100 %) held: one RK4 step of the bench, then the transmitters'
+    /// lags.
+    pub fn advance(&mut self, torque_ref_pct: f64, h_s: f64) -> Result<(), PlantError> {
+        match self.rich.as_mut() {
+            Some(r) => r.advance(&self.bench, &self.dynamics, torque_ref_pct, h_s),
+            // One step of h (h <= 1 ms < MAX_STEP_S), also below model-core's 1 µs
+            // smallest step, as `simulate` integrates a short interval.
+            None => {
+                self.bench
+                    .advance(
+                        &mut self.state,
+                        torque_ref_pct,
+                        h_s,
+                        MAX_STEP_S,
+                        Scheme::Rk4,
+                    )
+                    .map_err(|e| PlantError::Model(e.to_string()))?;
+            }
+        }
+        let (w_now, q_now, p_now) = self.now();
+        if !(w_now.is_finite() && q_now.is_finite()) {
+            return Err(PlantError::Diverged);
+        }
+        let (s, q, p) = &mut self.seen;
+        self.pressure.lag(p, p_now, h_s);
+        self.flow.lag(q, q_now, h_s);
+        SPEED.lag(s, w_now, h_s);
+        Ok(())
+    }
+
+    /// The logged readings now (speed rpm, flow l/s, pressure mca): each transmitter's lagged
+    /// value with its noise, through its ADC and read back on its span's line (not clamped to
+    /// the span, as a logger records it). Three draws of the noise, in that order.
+    pub fn readings(&mut self) -> (f64, f64, f64) {
+        let (s, q, p) = self.seen;
+        (
+            SPEED.read(s, &mut self.rng),
+            self.flow.read(q, &mut self.rng),
+            self.pressure.read(p, &mut self.rng),
+        )
+    }
+
+    /// What the controller sees now: the pressure and flow transmitters' ADC codes (the
+    /// lagged values with their noise; [`FAULT_MA`]'s code for a failed transmitter) and the
+    /// drive's readings (speed with the speed channel's noise, the electromagnetic torque it
+    /// delivers, status 0), `None` while the link is cut. The same three draws of the noise
+    /// as [`Self::readings`], whatever the sensors' state.
+    pub fn frame(&mut self) -> PlantFrame {
+        let (s, q, p) = self.seen;
+        let speed = SPEED.noisy(s, &mut self.rng);
+        let flow = self.flow.noisy(q, &mut self.rng);
+        let pressure = self.pressure.noisy(p, &mut self.rng);
+        let code = |l: &LoopConfig, ok: bool, v: f64| {
+            if ok {
+                adc_code(l, v)
+            } else {
+                l.code(FAULT_MA)
+            }
+        };
+        let torque_pct = self.truth().torque_pct;
+        PlantFrame {
+            pressure_code: code(&PRESSURE_LOOP, self.sensors.pressure_meter, pressure),
+            flow_code: code(&FLOW_LOOP, self.sensors.flow_meter, flow),
+            drive: self.sensors.link.then_some(VfdReadings {
+                speed_rpm: speed as f32,
+                torque_pct: torque_pct as f32,
+                status: 0,
+            }),
+        }
+    }
+
+    /// The true state now.
+    pub fn truth(&self) -> Truth {
+        let (speed_rpm, flow_lps, pressure_mca) = self.now();
+        let torque_pct = match &self.rich {
+            Some(r) => r.te_pct,
+            None => self.bench.signals(&self.state).electromagnetic_torque_pct,
+        };
+        Truth {
+            speed_rpm,
+            flow_lps,
+            pressure_mca,
+            valve_k2: self.bench.params().valve_k2,
+            torque_pct,
+        }
+    }
+
+    /// The true bench's parameters now (its curves and its valve).
+    pub fn params(&self) -> &BenchParams<f64> {
+        self.bench.params()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn quantisation_step_and_noise_level() {
+        let mut rng = SplitMix64::new(1);
+        let quiet = Transmitter {
+            noise: 0.0,
+            ..PRESSURE
+        };
+        let a = quiet.read(2.0, &mut rng);
+        // One code of the shared front end (22 mA over 4095 codes) on the 0..10 mca span.
+        let l = PRESSURE_LOOP;
+        let lsb = f64::from(l.current_ma(1)) * 10.0 / 16.0;
+        assert!((lsb - 0.00336).abs() < 1e-5, "{lsb}");
+        assert!((a - 2.0).abs() <= lsb / 2.0 + 1e-6, "{a}");
+        let n = 20_000;
+        let xs: Vec<f64> = (0..n).map(|_| FLOW.read(15.0, &mut rng)).collect();
+        let mean = xs.iter().sum::<f64>() / n as f64;
+        let sd = (xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n as f64).sqrt();
+        // 0.02 l/s of noise and a code's 0.010 l/s of quantisation (uniform: 0.0029 l/s).
+        assert!(
+            (mean - 15.0).abs() < 0.01 && (sd - 0.0202).abs() < 0.004,
+            "{mean} {sd}"
+        );
+        // Below and above the span the transmitter saturates at NE 43's measuring range.
+        let below = quiet.read(-5.0, &mut rng);
+        let above = quiet.read(50.0, &mut rng);
+        assert!((below + 0.125).abs() <= lsb, "{below}");
+        assert!((above - 10.3125).abs() <= lsb, "{above}");
+    }
+
+    #[test]
+    fn default_options_are_the_paper_bench_and_the_old_lags_exactly() {
+        // The defaults of the command line give the constants bit for bit.
+        let flow = parse_lag_ms("--flow-lag-ms", "40").unwrap();
+        let pressure = parse_lag_ms("--pressure-lag-ms", "20").unwrap();
+        assert_eq!(flow.to_bits(), FLOW.tau_s.to_bits());
+        assert_eq!(pressure.to_bits(), PRESSURE.tau_s.to_bits());
+        let zero = parse_curve_error("0").unwrap();
+        assert_eq!((zero.head_pct, zero.torque_pct), (0.0, 0.0));
+        let o = PlantOptions::with_seed(3);
+        assert_eq!((o.flow_lag_s, o.pressure_lag_s), (flow, pressure));
+        assert_eq!(o.dynamics, Dynamics::NONE);
+        assert_eq!(parse_water_inertia("0").unwrap(), 0.0);
+        assert_eq!(parse_lag_ms("--drive-lag-ms", "0").unwrap(), 0.0);
+        assert_eq!(true_bench(zero).unwrap(), WhiteBox::<f64>::paper());
+        assert_eq!(
+            true_bench(parse_curve_error("-0").unwrap()).unwrap(),
+            WhiteBox::<f64>::paper()
+        );
+    }
+
+    #[test]
+    fn curve_error_scales_every_alpha_up_and_every_beta_down() {
+        let paper = BenchParams::<f64>::paper();
+        let b = true_bench(parse_curve_error("5").unwrap()).unwrap();
+        let p = b.params();
+        for (a, a0) in p.alpha.iter().zip(&paper.alpha) {
+            assert_eq!(*a, a0 * 1.05);
+        }
+        for (x, x0) in p.beta.iter().zip(&paper.beta) {
+            assert_eq!(*x, x0 * 0.95);
+        }
+        assert_eq!(
+            (p.gamma, p.pipe_k1, p.valve_k2, p.static_head_c_mca),
+            (
+                paper.gamma,
+                paper.pipe_k1,
+                paper.valve_k2,
+                paper.static_head_c_mca
+            )
+        );
+        // Parameters the model refuses are a one-line message naming the option.
+        // The two curves apart: 8 % more head and 8 % more load torque.
+        let p = true_bench(parse_curve_error("8,8").unwrap()).unwrap();
+        assert_eq!(p.params().alpha[0], paper.alpha[0] * 1.08);
+        assert_eq!(p.params().beta[0], paper.beta[0] * 1.08);
+        for text in ["1,2,3", "x,1", "1,30", ""] {
+            let e = parse_curve_error(text).unwrap_err();
+            assert!(e.starts_with("--curve-error"), "{e}");
+        }
+        for pct in [f64::NAN, -100.0] {
+            let e = true_bench(CurveError {
+                head_pct: pct,
+                torque_pct: -pct,
+            })
+            .unwrap_err();
+            assert!(
+                e.starts_with("--curve-error ") && e.contains("refused"),
+                "{e}"
+            );
+            assert_eq!(e.lines().count(), 1);
+        }
+    }
+
+    #[test]
+    fn lag_is_first_order() {
+        let mut x = 0.0;
+        for _ in 0..20 {
+            PRESSURE.lag(&mut x, 1.0, 1e-3);
+        }
+        assert!((x - (1.0 - (-1.0f64).exp())).abs() < 1e-12);
+    }
+
+    /// At its steady state the plant stays there; a frame's codes read back (with the
+    /// controller's loop model) give the readings `bench-data` logs from the same noise draws.
+    #[test]
+    fn frames_carry_the_logged_readings_as_codes() {
+        let o = PlantOptions::with_seed(4);
+        let mut a = Plant::new(&o, 1.2, 55.0).unwrap();
+        let mut b = a.clone();
+        let start = a.truth();
+        for _ in 0..500 {
+            a.advance(55.0, 1e-3).unwrap();
+            b.advance(55.0, 1e-3).unwrap();
+        }
+        let t = a.truth();
+        assert!(
+            (t.speed_rpm - start.speed_rpm).abs() < 1e-6,
+            "{t:?} vs {start:?}"
+        );
+        assert!((t.valve_k2 - 1.2 * BenchParams::<f64>::paper().valve_k2).abs() < 1e-15);
+        for _ in 0..20 {
+            let (speed, flow, pressure) = a.readings();
+            let f = b.frame();
+            let back = |l: &LoopConfig, code: u16| f64::from(l.value_unclamped(l.current_ma(code)));
+            assert_eq!(back(&PRESSURE_LOOP, f.pressure_code), pressure);
+            assert_eq!(back(&FLOW_LOOP, f.flow_code), flow);
+            let d = f.drive.unwrap();
+            assert_eq!(f64::from(d.speed_rpm), speed as f32 as f64);
+            assert_eq!(f64::from(d.torque_pct), t.torque_pct as f32 as f64);
+            assert_eq!(d.status, 0);
+            // Within the noise's bound (3.46 σ) and a code of the truth.
+            assert!((pressure - t.pressure_mca).abs() < 3.5 * PRESSURE.noise + 0.0035);
+            assert!((flow - t.flow_lps).abs() < 3.5 * FLOW.noise + 0.011);
+        }
+    }
+
+    /// A failed transmitter reads 2 mA (an NE 43 fault for the controller's input), a cut link
+    /// gives no drive readings; the noise draws go on as they would (the other signals are
+    /// what they would have been).
+    #[test]
+    fn failed_sensors_and_a_cut_link_show_in_the_frame() {
+        let o = PlantOptions::with_seed(9);
+        let mut a = Plant::new(&o, 1.0, 40.0).unwrap();
+        let mut b = a.clone();
+        b.set_sensors(SensorState {
+            flow_meter: false,
+            pressure_meter: true,
+            link: false,
+        });
+        let (fa, fb) = (a.frame(), b.frame());
+        assert_eq!(fb.flow_code, FLOW_LOOP.code(FAULT_MA));
+        assert!(FLOW_LOOP.current_ma(fb.flow_code) < model_core::transmitter::FAULT_LOW_MA);
+        assert_eq!(fb.pressure_code, fa.pressure_code);
+        assert!(fa.drive.is_some() && fb.drive.is_none());
+        b.set_sensors(SensorState {
+            pressure_meter: false,
+            ..SensorState::OK
+        });
+        let (fa, fb) = (a.frame(), b.frame());
+        assert_eq!(fb.pressure_code, PRESSURE_LOOP.code(FAULT_MA));
+        assert_eq!((fb.flow_code, fb.drive), (fa.flow_code, fa.drive));
+    }
+
+    #[test]
+    fn valve_factors_outside_the_range_are_refused() {
+        let mut p = Plant::new(&PlantOptions::with_seed(1), 1.0, 30.0).unwrap();
+        for bad in [0.1, 5.5, f64::NAN, f64::INFINITY] {
+            assert!(
+                matches!(p.set_valve_factor(bad), Err(PlantError::Options(_))),
+                "{bad}"
+            );
+        }
+        let k2 = p.truth().valve_k2;
+        assert!(p.set_valve_factor(0.2).is_ok() && p.set_valve_factor(5.0).is_ok());
+        assert_eq!(p.truth().valve_k2, 5.0 * k2);
+        assert!(matches!(
+            Plant::new(&PlantOptions::with_seed(1), 1.0, 120.0),
+            Err(PlantError::Model(_))
+        ));
+    }
+
+    /// With a drive lag the delivered torque (the drive's reading) follows a torque step
+    /// through the lag: 63 % of the way after one time constant.
+    #[test]
+    fn the_drive_reading_follows_its_lag() {
+        let o = PlantOptions {
+            dynamics: Dynamics {
+                water_inertia: 0.0,
+                drive_lag_s: 0.05,
+            },
+            ..PlantOptions::with_seed(1)
+        };
+        let gamma = BenchParams::<f64>::paper().gamma;
+        let (te0, te1) = (
+            electromagnetic_torque_pct(&gamma, 30.0),
+            electromagnetic_torque_pct(&gamma, 60.0),
+        );
+        let mut p = Plant::new(&o, 1.0, 30.0).unwrap();
+        assert!((p.truth().torque_pct - te0).abs() < 1e-9);
+        for _ in 0..50 {
+            p.advance(60.0, 1e-3).unwrap();
+        }
+        let frac = (p.truth().torque_pct - te0) / (te1 - te0);
+        assert!((frac - (1.0 - (-1.0f64).exp())).abs() < 1e-9, "{frac}");
+        let d = p.frame().drive.unwrap();
+        assert_eq!(d.torque_pct, p.truth().torque_pct as f32);
+    }
+}

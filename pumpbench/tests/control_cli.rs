@@ -1,0 +1,222 @@
+//! `pumpbench control`: the controller's loops closed around the built-in plant, through the
+//! command line: a short scenario file (the run's CSV checked row by row), the tables, the
+//! targets, the figure, and refusals.
+
+mod common;
+use common::{ok, pumpbench, refused, write, Table};
+
+/// A short pressure scenario: 2 mca, then 3 mca at 0.5 s, held 2.5 s.
+const SHORT: &str = "t_s,mode,setpoint,valve\n0,3,2,1\n0.5,3,3,1\n";
+
+#[test]
+fn a_short_run_holds_its_pressure_within_limits_for_both_laws() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = write(dir.path(), "s.csv", SHORT);
+    let csv = dir.path().join("run.csv");
+    let csv_text = csv.display().to_string();
+    let out = pumpbench(&[
+        "control",
+        "--scenario",
+        &s,
+        "--hold-s",
+        "2.5",
+        "--output",
+        &csv_text,
+    ]);
+    let stdout = ok(&out, "control");
+    assert!(stdout.contains("TRUE pressure"), "{stdout}");
+    assert!(stdout.contains("setpoint 2 → 3 mca (up)"), "{stdout}");
+    assert!(
+        stdout.contains("model") && stdout.contains("pi"),
+        "{stdout}"
+    );
+    let run = Table::parse(&std::fs::read_to_string(&csv).unwrap());
+    for name in [
+        "law",
+        "t_s",
+        "torque_ref_pct",
+        "pressure_true",
+        "setpoint",
+        "status",
+    ] {
+        assert!(run.header.iter().any(|h| h == name), "{name}");
+    }
+    let law = run.col("law");
+    let t = run.col("t_s");
+    let torque = run.col("torque_ref_pct");
+    let p = run.col("pressure_true");
+    assert!(
+        run.rows.iter().flatten().all(|v| v.is_finite()),
+        "a NaN in the run"
+    );
+    assert!(torque.iter().all(|u| (0.0..=100.0).contains(u)));
+    for l in [0.0, 1.0] {
+        let rows: Vec<usize> = (0..t.len()).filter(|&k| law[k] == l).collect();
+        // From −6 s (the settled start) to 3 s, a row per 5 ms.
+        assert_eq!(rows.len(), 1800, "law {l}");
+        // The last 0.5 s within 2 % of 3 mca; the torque at most 1 % per 5 ms (200 %/s).
+        for &k in rows.iter().filter(|&&k| t[k] >= 2.5) {
+            assert!((p[k] - 3.0).abs() <= 0.06, "law {l} at {}: {}", t[k], p[k]);
+        }
+        for w in rows.windows(2) {
+            assert!((torque[w[1]] - torque[w[0]]).abs() <= 1.0 + 1e-3, "law {l}");
+        }
+    }
+}
+
+#[test]
+fn targets_print_pass_or_miss_and_one_law_runs_alone() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = write(dir.path(), "s.csv", SHORT);
+    let png = dir.path().join("run.png");
+    let png_text = png.display().to_string();
+    let out = pumpbench(&[
+        "control",
+        "--scenario",
+        &s,
+        "--hold-s",
+        "2",
+        "--controller",
+        "pi",
+        "--targets",
+        "--plot",
+        &png_text,
+    ]);
+    let stdout = ok(&out, "control --targets");
+    assert!(stdout.contains("≤ 0.5 "), "{stdout}");
+    assert!(
+        stdout.contains("PASS") || stdout.contains("MISS"),
+        "{stdout}"
+    );
+    assert!(!stdout.contains("model"), "PI alone: {stdout}");
+    let bytes = std::fs::read(&png).unwrap();
+    assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n");
+}
+
+#[test]
+fn bad_scenarios_and_options_are_refused_with_one_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let bad = write(
+        dir.path(),
+        "bad.csv",
+        "t_s,mode,setpoint,valve\n0,3,2,1\n1,9,2,1\n",
+    );
+    refused(
+        &pumpbench(&["control", "--scenario", &bad]),
+        &["bad.csv:3:2 (mode)", "unknown mode 9"],
+        "bad mode",
+    );
+    let back = write(
+        dir.path(),
+        "back.csv",
+        "t_s,mode,setpoint,valve\n0,3,2,1\n0,3,3,1\n",
+    );
+    refused(
+        &pumpbench(&["control", "--scenario", &back]),
+        &["back.csv:3:1 (t_s)", "not after"],
+        "times",
+    );
+    refused(
+        &pumpbench(&["control", "--scenario", "no-such-scenario"]),
+        &["--scenario no-such-scenario", "pressure-steps"],
+        "unknown name",
+    );
+    let s = write(dir.path(), "s.csv", SHORT);
+    refused(
+        &pumpbench(&["control", "--scenario", &s, "--flow-lag-ms", "-3"]),
+        &["--flow-lag-ms -3"],
+        "lag",
+    );
+    refused(
+        &pumpbench(&["control", "--scenario", &s, "--curve-error", "30"]),
+        &["--curve-error 30"],
+        "curve error",
+    );
+    refused(
+        &pumpbench(&["control", "--scenario", &s, "--plot", "x.jpg"]),
+        &["--plot x.jpg", ".png"],
+        "plot",
+    );
+    refused(
+        &pumpbench(&["control", "--scenario", &s, "--output", &s]),
+        &["--output", "same file"],
+        "output over the scenario",
+    );
+    // A setpoint the plant cannot hold at its start.
+    let far = write(dir.path(), "far.csv", "t_s,mode,setpoint,valve\n0,3,60,1\n");
+    refused(
+        &pumpbench(&["control", "--scenario", &far]),
+        &["setpoint 60 mca cannot be held on this plant"],
+        "unreachable start",
+    );
+}
+
+/// Every built-in scenario runs both laws to its end with neither a NaN nor a torque outside
+/// its limits, and has a table for each of its rows.
+#[test]
+fn every_built_in_scenario_runs_both_laws() {
+    for (name, rows) in [
+        ("pressure-steps", 4),
+        ("valve-steps", 5),
+        ("flow-steps", 8),
+        ("flow-meter-lost", 6),
+        ("link-cut", 3),
+    ] {
+        let out = pumpbench(&["control", "--scenario", name, "--targets"]);
+        let stdout = ok(&out, name);
+        assert!(stdout.contains(&format!("scenario {name},")), "{stdout}");
+        for law in ["model", "pi"] {
+            assert!(
+                stdout.contains(&format!("{law}: torque NaN steps 0, outside its limits 0,")),
+                "{name}: {stdout}"
+            );
+        }
+        assert_eq!(stdout.matches("\nt = ").count(), rows, "{name}: {stdout}");
+        if name == "flow-steps" {
+            assert!(stdout.contains("flow lag 150 ms"), "{stdout}");
+        }
+    }
+}
+
+/// The same seed, the same run: twice the same CSV, and a law alone gives the rows it has
+/// beside the other.
+#[test]
+fn runs_are_deterministic_and_each_law_sees_the_same_plant() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = write(dir.path(), "s.csv", SHORT);
+    let run = |controller: &str, name: &str| -> String {
+        let p = dir.path().join(name);
+        let p_text = p.display().to_string();
+        ok(
+            &pumpbench(&[
+                "control",
+                "--scenario",
+                &s,
+                "--hold-s",
+                "1",
+                "--curve-error",
+                "-5,5",
+                "--seed",
+                "3",
+                "--controller",
+                controller,
+                "--output",
+                &p_text,
+            ]),
+            controller,
+        );
+        std::fs::read_to_string(p).unwrap()
+    };
+    let both = run("both", "a.csv");
+    assert_eq!(both, run("both", "b.csv"));
+    let model = run("model", "m.csv");
+    let pi = run("pi", "p.csv");
+    let mut lines = both.lines();
+    let header = lines.next().unwrap();
+    let (m_rows, p_rows): (Vec<&str>, Vec<&str>) = lines.partition(|l| l.starts_with("0,"));
+    assert_eq!(model, format!("{header}\n{}\n", m_rows.join("\n")));
+    assert_eq!(pi, format!("{header}\n{}\n", p_rows.join("\n")));
+    // The laws differ (else the comparison shows nothing).
+    assert_ne!(m_rows.len(), 0);
+    assert_ne!(m_rows[m_rows.len() - 1][2..], p_rows[p_rows.len() - 1][2..]);
+}
