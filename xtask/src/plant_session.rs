@@ -468,7 +468,9 @@ mod tests {
         let (b, _) = scenario(&mut HostEndpoint::new().unwrap()).unwrap();
         assert_eq!(a, b);
         assert_eq!(a[..3], ["H 1 5", "K", "K"]);
-        assert_eq!(a.last().map(String::as_str), Some("B"));
+        // The host's session answers the end (`HostEndpoint::quit` checks its `B`); it is
+        // not among the replies compared.
+        assert!(a.last().is_some_and(|l| l.starts_with("T ")));
         assert!(a.contains(&"E finite".to_string()));
         assert_eq!(
             a.iter().filter(|l| l.starts_with("T ")).count() as u32,
