@@ -413,6 +413,8 @@ pub struct Controller<const NP: usize, const HP: usize, const NF: usize, const H
     last_requested_pct: f32,
     /// The VFD link was in alarm at the last step.
     link_was_down: bool,
+    /// The link came back: the loop resumes at its next control tick.
+    resume: bool,
     /// The observer's last estimate, as the loops use it.
     view: LoopView,
     /// The loop's flags this step: acting on the observer's value, holding for lack of one.
@@ -489,6 +491,7 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             last_applied_pct: 0.0,
             last_requested_pct: 0.0,
             link_was_down: false,
+            resume: false,
             view: LoopView {
                 load: Load {
                     valve_k2: paper_k2,
@@ -611,14 +614,13 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             self.regulator = None;
             self.last_mode = Some(mode);
         }
-        let link_down = inp.vfd.link_alarm;
-        if link_down != self.link_was_down {
-            // The reference was not delivered (0 % applied): the loop restarts bumplessly from
-            // the applied torque when the link returns.
-            self.link_was_down = link_down;
-            if !link_down {
-                self.regulator = None;
-            }
+        // The reference was not delivered while the link was down (0 % applied): the loop,
+        // frozen meanwhile, goes on from the applied torque at its next control tick
+        // (`regulate`).
+        let link_back = self.link_was_down && !inp.vfd.link_alarm;
+        self.link_was_down = inp.vfd.link_alarm;
+        if link_back {
+            self.resume = true;
         }
         if !mode.regulates() {
             self.virtual_measurement = false;
@@ -725,6 +727,11 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
                 .map_or(self.last_requested_pct, |r| r.hold().torque_pct);
         }
         let applied = self.last_applied_pct;
+        if core::mem::take(&mut self.resume) {
+            if let Some(r) = self.regulator.as_mut() {
+                r.resume(measured, applied);
+            }
+        }
         let r = self
             .regulator
             .get_or_insert_with(|| Regulator::new(controlled, measured, applied, v.speed_rpm));

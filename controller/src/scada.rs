@@ -53,6 +53,8 @@
 //! | 12 | torque rate limit of modes 3 and 4 and of every mode switch, 0.1 %/s (default 2000) | 1..=65535 |
 //! | 13 | setpoint filter of modes 3 and 4 (the reference model's time constant), ms (default 250; 0: none) | 0..=10000 |
 //! | 14 | law of modes 3 and 4: 0 model-based (feedforward and scheduled PI), 1 PI alone (one gain set) | 0..=1 |
+//! | 15 | pressure transmitter's time constant (its damping) and the lags the loop does not model (the drive's), ms (default 50): the loop compares its reading with the reference lagged as much | 0..=10000 |
+//! | 16 | flow transmitter's time constant, ms (default 150) | 0..=10000 |
 //!
 //! Holding registers 3 and 4 exist only with a virtual bench ([`ScadaSlave::with_virtual_bench`]):
 //! on a board without one they answer exception 02 like any address outside the map, and so
@@ -78,9 +80,9 @@ use crate::types::{
 
 /// Input registers.
 pub const INPUT_REGISTERS: usize = 30;
-/// Holding registers (0..=14; 3 and 4 only with a virtual bench).
-pub const HOLDING_REGISTERS: usize = 15;
-/// Largest setpoint filter (holding register 13), ms.
+/// Holding registers (0..=16; 3 and 4 only with a virtual bench).
+pub const HOLDING_REGISTERS: usize = 17;
+/// Largest setpoint filter and transmitter time constant (holding registers 13, 15, 16), ms.
 pub const SETPOINT_FILTER_MAX_MS: u16 = 10_000;
 /// The holding registers that exist only with a virtual bench.
 pub const BENCH_HOLDING_REGISTERS: core::ops::Range<usize> = 3..5;
@@ -124,7 +126,7 @@ pub fn mode_from_register(v: u16) -> Option<Mode> {
     }
 }
 
-/// The loops' holding registers 8..=14, raw.
+/// The loops' holding registers 8..=16, raw.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct ControlRegisters {
     /// 8: pressure setpoint, 0.001 mca.
@@ -141,6 +143,10 @@ pub struct ControlRegisters {
     pub filter_ms: u16,
     /// 14: law, 0 model-based, 1 PI alone.
     pub law: u16,
+    /// 15: pressure transmitter's time constant, ms (0..=10000).
+    pub pressure_lag_ms: u16,
+    /// 16: flow transmitter's time constant, ms (0..=10000).
+    pub flow_lag_ms: u16,
 }
 
 impl ControlRegisters {
@@ -153,6 +159,8 @@ impl ControlRegisters {
         rate: 2000,
         filter_ms: 250,
         law: 0,
+        pressure_lag_ms: 50,
+        flow_lag_ms: 150,
     };
 
     /// The settings in the core's units.
@@ -169,6 +177,8 @@ impl ControlRegisters {
             } else {
                 ControlLaw::Model
             },
+            pressure_lag_s: f32::from(self.pressure_lag_ms) / 1000.0,
+            flow_lag_s: f32::from(self.flow_lag_ms) / 1000.0,
         }
     }
 
@@ -180,6 +190,8 @@ impl ControlRegisters {
             && self.rate >= 1
             && self.filter_ms <= SETPOINT_FILTER_MAX_MS
             && self.law <= 1
+            && self.pressure_lag_ms <= SETPOINT_FILTER_MAX_MS
+            && self.flow_lag_ms <= SETPOINT_FILTER_MAX_MS
     }
 }
 
@@ -428,6 +440,8 @@ impl ScadaSlave {
             self.control.rate,
             self.control.filter_ms,
             self.control.law,
+            self.control.pressure_lag_ms,
+            self.control.flow_lag_ms,
         ]
     }
 
@@ -509,6 +523,8 @@ impl ScadaSlave {
                 12 if v >= 1 => next.control.rate = v,
                 13 if v <= SETPOINT_FILTER_MAX_MS => next.control.filter_ms = v,
                 14 if v <= 1 => next.control.law = v,
+                15 if v <= SETPOINT_FILTER_MAX_MS => next.control.pressure_lag_ms = v,
+                16 if v <= SETPOINT_FILTER_MAX_MS => next.control.flow_lag_ms = v,
                 _ => return Err(Exception::IllegalDataValue),
             }
         }
@@ -652,7 +668,7 @@ mod tests {
         assert_eq!(exception(&mut s, &[1, 6, 0, 4, 0, 16]), 3, "fault bit 4");
         ask(&mut s, &frame(&[1, 6, 0, 4, 0, 0b1010])).unwrap();
         assert_eq!(s.faults, 0b1010);
-        assert_eq!(exception(&mut s, &[1, 3, 0, 14, 0, 2]), 2, "past the map");
+        assert_eq!(exception(&mut s, &[1, 3, 0, 16, 0, 2]), 2, "past the map");
     }
 
     #[test]
@@ -764,7 +780,7 @@ mod tests {
             "the bench's holding registers on a board"
         );
         assert_eq!(
-            exception(&mut s, &[1, 6, 0, 15, 0, 1]),
+            exception(&mut s, &[1, 6, 0, 17, 0, 1]),
             2,
             "write past the map"
         );
@@ -793,12 +809,21 @@ mod tests {
             "filter 10.001 s"
         );
         assert_eq!(exception(&mut s, &[1, 6, 0, 14, 0, 2]), 3, "law 2");
+        assert_eq!(
+            exception(&mut s, &[1, 6, 0, 16, 0x27, 0x11]),
+            3,
+            "flow lag 10.001 s"
+        );
         // The limits as a pair: low and high crossed in one write, refused whole.
         assert_eq!(
             exception(&mut s, &[1, 16, 0, 10, 0, 2, 4, 0x13, 0x88, 0x03, 0xE8]),
             3
         );
         assert_eq!(s.control, ControlRegisters::DEFAULT);
+        assert_eq!(
+            ControlRegisters::DEFAULT.settings(),
+            ControlSettings::DEFAULT
+        );
         assert_eq!(exception(&mut s, &[1, 6, 0, 2, 0, 2]), 3, "arithmetic 2");
         // Regression (hostile run): an unsupported function is 01 whatever its fields; an
         // oversized quantity in FC 01, 02 or 15 used to answer 03 (rmodbus's own check).

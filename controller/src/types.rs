@@ -71,7 +71,7 @@ impl ControlLaw {
     }
 }
 
-/// The pressure and flow loops' settings (SCADA holding registers 8..=14), in the core's
+/// The pressure and flow loops' settings (SCADA holding registers 8..=16), in the core's
 /// units.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -91,11 +91,18 @@ pub struct ControlSettings {
     pub setpoint_filter_s: f32,
     /// The loops' law.
     pub law: ControlLaw,
+    /// The pressure transmitter's time constant (its damping), s (0..=10): the loop compares
+    /// the reading with its reference lagged as much.
+    pub pressure_lag_s: f32,
+    /// The flow transmitter's time constant, s (0..=10).
+    pub flow_lag_s: f32,
 }
 
 impl ControlSettings {
     /// Defaults: setpoints 0, torque 0..=100 %, 200 %/s, a 0.25 s setpoint filter, the
-    /// model-based law.
+    /// model-based law, transmitter lags of 50 ms (pressure) and 150 ms (flow): on plants of
+    /// 20..60 ms and 40..150 ms the loops held their targets better erring long than short
+    /// (docs/control.md).
     pub const DEFAULT: Self = Self {
         pressure_setpoint_mca: 0.0,
         flow_setpoint_lps: 0.0,
@@ -104,6 +111,8 @@ impl ControlSettings {
         rate_pct_per_s: 200.0,
         setpoint_filter_s: 0.25,
         law: ControlLaw::Model,
+        pressure_lag_s: 0.05,
+        flow_lag_s: 0.15,
     };
 }
 
