@@ -1298,6 +1298,21 @@ fn scenario_of(text: &str, hold_s: f64) -> Result<(Scenario, Option<PathBuf>), F
 
 /// `pumpbench control`.
 pub fn command(a: ControlArgs) -> Result<(), Failure> {
+    let Some(name) = a.scenario.as_deref().filter(|_| !a.plant_stdio) else {
+        // The external plant: the boards' controller and session, one code path with the
+        // QEMU board's plant mode (board_common::serve_plant).
+        let mut steps = 0u64;
+        let served = board_common::serve_plant(
+            std::io::stdin().lock(),
+            &mut std::io::stdout().lock(),
+            |_| steps += 1,
+        );
+        eprintln!(
+            "pumpbench control --plant-stdio: {steps} controller steps ({:.3} s of plant time)",
+            steps as f64 * 1e-3
+        );
+        return served.map_err(|message| Failure { code: 1, message });
+    };
     if !(a.hold_s.is_finite() && a.hold_s > 0.0 && a.hold_s <= MAX_SCENARIO_S) {
         return Err(Failure::usage(format!(
             "--hold-s {}: must be within 0..{} s (exclusive of 0)",
@@ -1305,7 +1320,7 @@ pub fn command(a: ControlArgs) -> Result<(), Failure> {
             Short(MAX_SCENARIO_S)
         )));
     }
-    let (scenario, path) = scenario_of(&a.scenario, a.hold_s)?;
+    let (scenario, path) = scenario_of(name, a.hold_s)?;
     let flow_lag = match (&a.flow_lag_ms, scenario.flow_lag_ms) {
         (Some(t), _) => t.clone(),
         (None, Some(ms)) => Short(ms).to_string(),

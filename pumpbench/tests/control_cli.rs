@@ -220,3 +220,59 @@ fn runs_are_deterministic_and_each_law_sees_the_same_plant() {
     assert_ne!(m_rows.len(), 0);
     assert_ne!(m_rows[m_rows.len() - 1][2..], p_rows[p_rows.len() - 1][2..]);
 }
+
+/// `--plant-stdio`: the README's Python plant (`examples/plant.py`) closes the loop through
+/// pumpbench's standard input and output (needs `python3`), and a transcript of the protocol
+/// gets one reply per line, in lockstep.
+#[test]
+fn an_external_plant_closes_the_loop_through_plant_stdio() {
+    use std::io::Write;
+    use std::process::{Command, Stdio};
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .unwrap();
+    let bin = env!("CARGO_BIN_EXE_pumpbench");
+    let out = Command::new("python3")
+        .arg(root.join("examples/plant.py"))
+        .args(["--", bin, "control", "--plant-stdio"])
+        .output()
+        .expect("python3 on the PATH");
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{}: {text}", out.status);
+    assert!(
+        text.starts_with("pressure ") && text.contains(" mca after 10 s"),
+        "{text}"
+    );
+
+    let mut child = Command::new(bin)
+        .args(["control", "--plant-stdio"])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    child
+        .stdin
+        .take()
+        .unwrap()
+        .write_all(
+            b"H 1\nW 8 3000\nW 1 3\nS 745 745 0 0\nS 745 745 nan 0\nW 99 1\nS 745 745 -\nQ\n",
+        )
+        .unwrap();
+    let out = child.wait_with_output().unwrap();
+    assert!(out.status.success());
+    let replies: Vec<String> = String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .map(str::to_string)
+        .collect();
+    assert_eq!(replies.len(), 8, "{replies:?}");
+    assert_eq!(replies[..3], ["H 1 5", "K", "K"]);
+    assert!(replies[3].starts_with("T 4 "), "{replies:?}");
+    assert_eq!(replies[4], "E finite");
+    assert_eq!(replies[5], "E 2");
+    assert!(
+        replies[6].starts_with("T 9 0 "),
+        "the link cut: 0 %: {replies:?}"
+    );
+    assert_eq!(replies[7], "B");
+}

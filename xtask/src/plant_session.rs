@@ -11,7 +11,7 @@
 use crate::board::ensure_flip_link;
 use crate::qemu::{announced_pty, qemu_command, spawn_with_lines, Qemu, Serial};
 use crate::util::{cargo, root, run, target_dir, Result, TARGET};
-use controller::plant::{PlantFrame, PlantSession, Reply, Request, Served};
+use controller::plant::{PlantFrame, PlantSession, Reply, Request};
 use controller::vfd::VfdReadings;
 use controller::virtual_bench::{VirtualBench, VirtualBenchConfig};
 use std::io::{Read, Write};
@@ -57,28 +57,11 @@ pub fn build_plant_firmware() -> Result {
 /// `cargo xtask plant-stdio`: the controller's side of the protocol on standard input and
 /// output, until `Q` or the end of the input.
 pub fn plant_stdio() -> Result {
-    let (mut core, mut session) =
-        board_common::plant_session().map_err(|e| format!("plant session: {e}"))?;
-    let stdin = std::io::stdin().lock();
-    let mut stdout = std::io::stdout().lock();
-    let mut reply = String::new();
-    for byte in stdin.bytes() {
-        let byte = byte.map_err(|e| format!("standard input: {e}"))?;
-        reply.clear();
-        let served = session
-            .feed(byte, &mut core, &mut reply, |_| {})
-            .map_err(|_| "reply not written")?;
-        if !reply.is_empty() {
-            stdout
-                .write_all(reply.as_bytes())
-                .and_then(|()| stdout.flush())
-                .map_err(|e| format!("standard output: {e}"))?;
-        }
-        if served == Served::Quit {
-            break;
-        }
-    }
-    Ok(())
+    board_common::serve_plant(
+        std::io::stdin().lock(),
+        &mut std::io::stdout().lock(),
+        |_| {},
+    )
 }
 
 /// One request and its reply line (without the `\n`), whatever carries them.

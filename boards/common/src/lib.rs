@@ -28,7 +28,7 @@
 //! `start_systick`) is plain `no_std` code, tested on the host (`cargo test -p board-common`).
 //!
 //! The NARMAX models are the `pump-models` crate (compile-time data made by `pumpbench export`).
-#![no_std]
+#![cfg_attr(not(feature = "std"), no_std)]
 #![forbid(unsafe_code)]
 
 #[cfg(test)]
@@ -133,6 +133,39 @@ pub fn plant_session() -> Result<(Controller, controller::plant::PlantSession), 
     let core = build_controller(&PLANT_CONFIG)?;
     let lockstep = controller::plant::Lockstep::for_config(&PLANT_CONFIG)?;
     Ok((core, controller::plant::PlantSession::new(lockstep)))
+}
+
+/// Serves the plant protocol ([`controller::plant`]) on a byte stream: every byte of `input`
+/// fed to a fresh [`plant_session`], each reply written to `output` and flushed at once (the
+/// plant waits for it), until `Q` or the end of the input; `each` sees every controller step's
+/// outputs. What `cargo xtask plant-stdio` and `pumpbench control --plant-stdio` run on their
+/// standard input and output (feature `std`).
+#[cfg(feature = "std")]
+pub fn serve_plant(
+    input: impl std::io::Read,
+    output: &mut impl std::io::Write,
+    mut each: impl FnMut(&controller::control::Outputs),
+) -> Result<(), std::string::String> {
+    let (mut core, mut session) =
+        plant_session().map_err(|e| std::format!("plant session: {e}"))?;
+    let mut reply = std::string::String::new();
+    for byte in input.bytes() {
+        let byte = byte.map_err(|e| std::format!("plant input: {e}"))?;
+        reply.clear();
+        let served = session
+            .feed(byte, &mut core, &mut reply, &mut each)
+            .map_err(|_| "reply not written")?;
+        if !reply.is_empty() {
+            output
+                .write_all(reply.as_bytes())
+                .and_then(|()| output.flush())
+                .map_err(|e| std::format!("plant output: {e}"))?;
+        }
+        if served == controller::plant::Served::Quit {
+            break;
+        }
+    }
+    Ok(())
 }
 
 /// Milliseconds from a free-running microsecond counter (32 bits, wrapping), counted by
