@@ -142,7 +142,7 @@ pub fn plant_session() -> Result<(Controller, controller::plant::PlantSession), 
 /// standard input and output (feature `std`).
 #[cfg(feature = "std")]
 pub fn serve_plant(
-    input: impl std::io::Read,
+    input: impl std::io::BufRead,
     output: &mut impl std::io::Write,
     mut each: impl FnMut(&controller::control::Outputs),
 ) -> Result<(), std::string::String> {
