@@ -149,9 +149,9 @@ pub struct ControlArgs {
     /// link-cut) or a scenario CSV file.
     #[arg(long, required_unless_present = "plant_stdio")]
     pub scenario: Option<String>,
-    /// Instead of the built-in plant, serve the plant protocol (controller::plant, version
-    /// 1) on standard input and output: an external plant closes the loop in lockstep, its
-    /// scenario in its own `W` lines (docs/control.md). The controller is the boards'.
+    /// Instead of the built-in plant, serve the plant protocol (`controller::plant`, version 1)
+    /// on standard input and output: an external plant closes the loop in lockstep, its
+    /// scenario in its own `W` lines (docs/control.md); the controller is the boards'.
     #[arg(long, conflicts_with_all = ["scenario", "controller", "targets", "output", "plot"])]
     pub plant_stdio: bool,
     /// The law(s) to run.
