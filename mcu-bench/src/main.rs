@@ -362,13 +362,16 @@ const LOOP_SETPOINTS_MCA: [f32; 4] = [2.0, 4.0, 1.0, 3.0];
 /// How long each loop setpoint holds, ms.
 const LOOP_STEP_MS: u32 = 5000;
 
+/// The loop's period on the white-box bench: pressure steps 2 → 4 → 1 → 3 mca, the load as
+/// the observer gives it, a new estimate every 50 ms (k2 wandering ±1 %, so the feedforward's
+/// load change runs its second inverse every 10th period, as in the firmware).
 fn regulator_step(c: &mut Cost, n: u32) -> Result<(), Error> {
     use controller::regulate::{Controlled, Regulator, CONTROL_PERIOD_MS};
     use controller::types::ControlSettings;
     use model_core::inverse::Load;
     let bench = WhiteBox::<f32>::paper();
     let p = *bench.params();
-    let load = Load {
+    let mut load = Load {
         valve_k2: p.valve_k2,
         head_scale: 1.0,
         torque_scale: 1.0,
@@ -382,8 +385,14 @@ fn regulator_step(c: &mut Cost, n: u32) -> Result<(), Error> {
     );
     let s = ControlSettings::DEFAULT;
     let per_step = LOOP_STEP_MS / CONTROL_PERIOD_MS;
+    let per_estimate = NARMAX_MS / CONTROL_PERIOD_MS;
+    let mut rng = SplitMix64::new(SEED);
     for k in 0..n {
         let sp = LOOP_SETPOINTS_MCA[((k / per_step) % 4) as usize];
+        if k % per_estimate == 0 {
+            let unit = (rng.next_u64() >> 40) as f32 / (1u32 << 24) as f32;
+            load.valve_k2 = p.valve_k2 * (1.0 + 0.02 * (unit - 0.5));
+        }
         let y = bench.signals(&st).pressure_mca;
         let o = c.time(|| {
             reg.step(
