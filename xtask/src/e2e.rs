@@ -66,18 +66,21 @@ pub fn run(elf: &Path) -> Result<String> {
         return Err(format!("operating point at 50 % not reached:\n{report}"));
     }
     // Spec exceptions.
-    let t = mbpoll(&pty, &["-a", "1", "-t", "3", "-r", "27", "-c", "1"], &[])?;
+    // The first input register past the map (mbpoll counts from 1).
+    let past = (INPUT_REGISTERS + 1).to_string();
+    let t = mbpoll(&pty, &["-a", "1", "-t", "3", "-r", &past, "-c", "1"], &[])?;
     if !t.to_lowercase().contains("illegal data address") {
         return Err(format!(
-            "input register 26: expected exception 02, got:\n{t}"
+            "input register {INPUT_REGISTERS}: expected exception 02, got:\n{t}"
         ));
     }
     let t = mbpoll(&pty, &["-a", "1", "-t", "4", "-r", "1"], &["10001"])?;
     if !t.to_lowercase().contains("illegal data value") {
         return Err(format!("setpoint 10001: expected exception 03, got:\n{t}"));
     }
-    report
-        .push_str("exceptions 02 (input register 26) and 03 (setpoint 10001): as the spec says\n");
+    report.push_str(&format!(
+        "exceptions 02 (input register {INPUT_REGISTERS}) and 03 (setpoint 10001): as the spec says\n"
+    ));
     // Malformed frames: bad CRC, another unit; silence, then a valid request is answered.
     {
         let mut port = std::fs::OpenOptions::new()
