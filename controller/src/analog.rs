@@ -84,6 +84,23 @@ impl AnalogInput {
         self.faulted
     }
 
+    /// Reads one ADC code without counting it as a sample: the fault state neither latches
+    /// nor clears (its timing stays the models' sampling's, whatever else reads the loop); a
+    /// code outside the fault bounds, or a latched fault, reads as [`Status::Fault`] with
+    /// the last good value. The control loops' extra readings (every 5 ms) use it.
+    pub fn peek(&self, code: u16) -> Reading {
+        let mut probe = *self;
+        let r = probe.sample(code);
+        if self.faulted && r.status != Status::Fault {
+            return Reading {
+                value: self.last_good,
+                current_ma: r.current_ma,
+                status: Status::Fault,
+            };
+        }
+        r
+    }
+
     /// Takes one ADC sample.
     pub fn sample(&mut self, code: u16) -> Reading {
         let i = self.config.current_ma(code);

@@ -34,7 +34,9 @@
 use crate::analog::{AnalogInput, LoopConfig, Status as InputStatus, FLOW_LOOP, PRESSURE_LOOP};
 use crate::protect::{Protection, ProtectionConfig};
 use crate::regulate::{Controlled, Regulator, CONTROL_PERIOD_MS, CONTROL_PHASE_MS};
-use crate::types::{Arithmetic, ControlSettings, InjectedFaults, Mode, Published, Status};
+use crate::types::{
+    Arithmetic, ControlLaw, ControlSettings, InjectedFaults, Mode, Published, Status,
+};
 use crate::vfd::{VfdMap, VfdReadings};
 use model_core::excitation::McuPulses;
 use model_core::inverse::Load;
@@ -53,12 +55,24 @@ pub const LOG_EVERY_MS: u32 = 1000;
 pub const DRIVE_READING_FRESH_MS: u32 = 100;
 
 /// The observer's pressure stands in for a pressure transmitter in fault (mode 3) only while
-/// its standard deviation is at most this, mca (5 % of a 3 mca setpoint): else the loop holds
-/// its last torque and alarms. Measured with `pumpbench control` (the transmitter lost at
-/// 3 mca, then the valve ×1.3; docs/control.md): right after the valve step the observer's σ
-/// rises over it for ≈ 0.5 s while its k2 converges; at 0.05 mca it stayed over it for
-/// seconds, and the held torque left the pressure 23 % high.
-pub const VIRTUAL_PRESSURE_MAX_SD_MCA: f32 = 0.15;
+/// its standard deviation is at most this fraction of the setpoint (5 %; and at least
+/// [`VIRTUAL_PRESSURE_MIN_SD_MCA`]): else the loop holds its last torque and alarms. Measured
+/// with `pumpbench control` (the transmitter lost at 3 mca, then the valve ×1.3;
+/// docs/control.md): right after the valve step the observer's σ rises over it for ≈ 0.5 s
+/// while its k2 converges; at 0.05 mca (1.7 %) it stayed over it for seconds, and the held
+/// torque left the pressure 23 % high. The σ is the observer's own: on a plant whose curves
+/// differ from the model's in shape, not only in scale, it can be small and wrong
+/// (docs/control.md, Limits).
+pub const VIRTUAL_PRESSURE_MAX_SD_FRACTION: f32 = 0.05;
+
+/// The least standard deviation [`VIRTUAL_PRESSURE_MAX_SD_FRACTION`] allows, mca (3 ADC codes
+/// of the bench's 0..10 mca loop): at a setpoint near 0 the observer is still usable.
+pub const VIRTUAL_PRESSURE_MIN_SD_MCA: f32 = 0.01;
+
+/// A mode switch (and the VFD link's return) moves the torque at the loop's rate (holding
+/// register 12) or at this one, %/s, the faster: a stop takes at most 2 s from 100 %, whatever
+/// the loop's rate.
+pub const SWITCH_RATE_MIN_PCT_PER_S: f32 = 50.0;
 
 /// A failed white-box step shows in status bit 1 (any alarm) for this long, ms.
 pub const MODEL_FAULT_SHOWN_MS: u32 = 2000;
@@ -405,6 +419,11 @@ pub struct Controller<const NP: usize, const HP: usize, const NF: usize, const H
     regulator: Option<Regulator>,
     /// The mode acted on at the last step (stop while held); `None` before the first.
     last_mode: Option<Mode>,
+    /// The loops' law at the last step.
+    last_law: ControlLaw,
+    /// Manual mode entered from a running automatic mode: the torque held then, and the
+    /// manual setpoint it holds against (a new setpoint ends the hold).
+    manual_hold: Option<(f32, f32)>,
     /// The mode acts in closed loop (the last step's): the next control ticks sample.
     regulating: bool,
     /// After a mode switch, the torque moves from the last applied one toward the new mode's
@@ -489,6 +508,8 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             out: Published::default(),
             regulator: None,
             last_mode: None,
+            last_law: ControlLaw::Model,
+            manual_hold: None,
             regulating: false,
             transfer: false,
             last_applied_pct: 0.0,
@@ -610,20 +631,31 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
     ) -> f32 {
         let c = &inp.commands;
         let mode = if self.hold { Mode::Stop } else { c.mode };
-        if self.last_mode != Some(mode) {
-            // A switch (a trip's hold included): the loop restarts bumplessly, the torque
-            // moves at the rate limit (a trip's 0 % excepted, below).
+        if self.last_mode != Some(mode) || self.last_law != c.control.law {
+            // A switch (a trip's hold included), or the loop's law changed: the loop restarts
+            // bumplessly, the torque moves at the switch rate (a trip's 0 % excepted, below).
+            // Into manual from a running automatic mode, the torque stays where it was until
+            // the manual setpoint is written (register 0 does not follow the automatic modes).
             self.transfer = self.last_mode.is_some();
+            self.manual_hold = match (self.last_mode, mode) {
+                (Some(Mode::Profile | Mode::Pressure | Mode::Flow), Mode::Manual) => {
+                    Some((self.last_applied_pct, c.setpoint_pct))
+                }
+                (_, Mode::Manual) => self.manual_hold,
+                _ => None,
+            };
             self.regulator = None;
             self.last_mode = Some(mode);
+            self.last_law = c.control.law;
         }
         // The reference was not delivered while the link was down (0 % applied): the loop,
         // frozen meanwhile, goes on from the applied torque at its next control tick
-        // (`regulate`).
+        // (`regulate`), and in every mode the torque comes back at the switch rate.
         let link_back = self.link_was_down && !inp.vfd.link_alarm;
         self.link_was_down = inp.vfd.link_alarm;
         if link_back {
             self.resume = true;
+            self.transfer = true;
         }
         if !mode.regulates() {
             self.virtual_measurement = false;
@@ -636,7 +668,13 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             }
             Mode::Manual => {
                 self.profile = None;
-                c.setpoint_pct
+                match self.manual_hold {
+                    Some((held, at)) if at == c.setpoint_pct => held,
+                    _ => {
+                        self.manual_hold = None;
+                        c.setpoint_pct
+                    }
+                }
             }
             Mode::Profile => {
                 let seed = self.profile_seed;
@@ -656,12 +694,11 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             return 0.0;
         }
         let s = &c.control;
-        if mode.regulates() {
+        let from = self.last_applied_pct;
+        if mode.regulates() && !self.transfer {
             // The loop's torque changes once a period; the output moves toward it at the rate
             // limit every ms (a ramp, not a 1 % step every 5 ms), within the limits at once.
             let step = s.rate_pct_per_s * TICK_MS as f32 * 1e-3;
-            let from = self.last_requested_pct;
-            self.transfer = false;
             return wanted
                 .max(from - step)
                 .min(from + step)
@@ -671,13 +708,18 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
         if !self.transfer {
             return wanted;
         }
-        let step = s.rate_pct_per_s * TICK_MS as f32 * 1e-3;
-        let from = self.last_applied_pct;
+        // After a switch or the link's return: from the torque the drive had, at the loop's
+        // rate or SWITCH_RATE_MIN_PCT_PER_S, the faster (a stop never takes minutes).
+        let step = s.rate_pct_per_s.max(SWITCH_RATE_MIN_PCT_PER_S) * TICK_MS as f32 * 1e-3;
         let moved = wanted.max(from - step).min(from + step);
         if moved == wanted {
             self.transfer = false;
         }
-        moved
+        if mode.regulates() {
+            moved.max(s.torque_min_pct).min(s.torque_max_pct)
+        } else {
+            moved
+        }
     }
 
     /// The loop's torque this step (modes 3 and 4): a new one on a control tick, else the
@@ -714,7 +756,9 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
                 )
             }
             _ => {
-                let virtual_ok = v.pressure_sd_mca <= VIRTUAL_PRESSURE_MAX_SD_MCA;
+                let limit = (VIRTUAL_PRESSURE_MAX_SD_FRACTION * s.pressure_setpoint_mca.abs())
+                    .max(VIRTUAL_PRESSURE_MIN_SD_MCA);
+                let virtual_ok = v.pressure_sd_mca <= limit;
                 self.virtual_measurement = pressure.is_none() && virtual_ok;
                 self.control_held = pressure.is_none() && !virtual_ok;
                 let measured =
@@ -805,8 +849,8 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
         // A control tick is never a model's sample tick (CONTROL_PHASE_MS): its samples are
         // the loop's alone, read before the torque they decide.
         let readings = control.then(|| {
-            let p = self.pressure_in.sample(inp.pressure_code);
-            let q = self.flow_in.sample(inp.flow_code);
+            let p = self.pressure_in.peek(inp.pressure_code);
+            let q = self.flow_in.peek(inp.flow_code);
             self.out.pressure_mca = p.value;
             self.out.flow_lps = q.value;
             (
@@ -895,7 +939,8 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
         let o = &mut self.out;
         o.trip_causes = self.protection.causes();
         o.status = Status {
-            running: inp.commands.mode != Mode::Stop && !self.hold,
+            // Running while commanded so, or while a torque is still applied (a stop's ramp).
+            running: (inp.commands.mode != Mode::Stop && !self.hold) || u > 0.0,
             any_alarm: !link_ok
                 || blind
                 || p_fault

@@ -138,6 +138,8 @@ pub struct Regulator {
     near: SteadyInverse<f32>,
     /// The load the last period's feedforward was computed at.
     load: Option<Load<f32>>,
+    /// The last torque was held at the range's end (not only the rate's) against the want.
+    at_range_limit: bool,
     /// The reference as the transmitter would show it (lagged by its time constant): what the
     /// measurement is compared with.
     seen_reference: f32,
@@ -161,6 +163,7 @@ impl Regulator {
             last_pct: torque_pct,
             fresh: true,
             load: None,
+            at_range_limit: false,
             seen_reference: measured,
             near: SteadyInverse {
                 torque_ref_pct: torque_pct,
@@ -230,9 +233,15 @@ impl Regulator {
         } else {
             1.0
         };
-        self.reference += (setpoint - self.reference) * a;
+        // The reference does not run on toward a setpoint the torque cannot reach: while the
+        // last torque sat at a limit with the error pushing into it, it waits (else it would
+        // have to come all the way back before the torque moved off the limit).
+        let into_limit = self.at_range_limit && (setpoint - self.reference) * self.last.error > 0.0;
+        if !into_limit {
+            self.reference += (setpoint - self.reference) * a;
+        }
         // The reference's rate, for the feedforward's dynamic part.
-        let rate = if a < 1.0 {
+        let rate = if a < 1.0 && !into_limit {
             (setpoint - self.reference) / s.setpoint_filter_s
         } else {
             0.0
@@ -271,6 +280,8 @@ impl Regulator {
         // MCU, and lo > hi (limits moved under the torque) resolves to the range's side.
         let torque = wanted.max(lo).min(hi);
         let limited = torque != wanted;
+        self.at_range_limit = (wanted > torque && torque >= s.torque_max_pct)
+            || (wanted < torque && torque <= s.torque_min_pct);
         if !(limited && (wanted - torque) * di > 0.0) {
             self.integral_pct += di;
         }

@@ -68,7 +68,9 @@ fn manual_50_pct_reaches_the_operating_point_in_3_s() {
 #[test]
 fn vfd_link_loss_forces_zero_torque_until_it_is_back() {
     let mut b = setup(Mode::Manual, 40.0);
-    run(&mut b, 200);
+    // The link comes up after its first exchange; the torque follows at the switch rate
+    // (200 %/s): 40 % 200 ms later.
+    run(&mut b, 400);
     assert_eq!(b.io.torque_ref_pct(), 40.0);
     assert!(!b.vfd.master().alarm());
     b.io.link_up = false;
@@ -95,7 +97,14 @@ fn vfd_link_loss_forces_zero_torque_until_it_is_back() {
     assert_eq!(regs[1], 0);
     assert_eq!(&regs[14..17], &[0, 0, 0], "no stale drive readings");
     b.io.link_up = true;
-    run(&mut b, 400);
+    // Back without a step: at most 0.2 % a ms (200 %/s).
+    let mut last = 0.0f32;
+    for _ in 0..400 {
+        run(&mut b, 1);
+        let u = b.io.torque_ref_pct();
+        assert!((u - last).abs() <= 0.2 + 1e-4, "{last} -> {u}");
+        last = u;
+    }
     assert!(!b.vfd.master().alarm());
     assert_eq!(b.io.torque_ref_pct(), 40.0);
 }

@@ -263,3 +263,86 @@ fn pressure_and_flow_hold_on_a_bench_further_from_the_model() {
     let q = b.io.bench.signals().flow_lps;
     assert!((q - 15.0).abs() < 0.3, "{q}");
 }
+
+/// Regressions of the hostile review: a link cut shorter than the ramp down, a change of law,
+/// manual from automatic, a slow loop rate on a stop, a setpoint the torque cannot reach.
+#[test]
+fn a_short_link_cut_comes_back_without_a_step() {
+    let mut b = holding_pressure(3.0);
+    write_holding(&mut b, FAULTS, 1 << 3);
+    // Until the alarm stands (the link takes its failed exchanges), then 100 ms more.
+    for _ in 0..3000 {
+        run(&mut b, 1);
+        if !status(&mut b).vfd_link_ok {
+            break;
+        }
+    }
+    assert!(!status(&mut b).vfd_link_ok, "the link alarm");
+    run(&mut b, 100);
+    write_holding(&mut b, FAULTS, 0);
+    let before = b.io.torque_ref_pct();
+    let t = torques(&mut b, 4000);
+    assert!(
+        largest_step(before, &t) <= 0.2 + 1e-4,
+        "a step of {} after a short cut",
+        largest_step(before, &t)
+    );
+}
+
+#[test]
+fn a_change_of_law_in_pressure_control_is_bumpless() {
+    let mut b = holding_pressure(3.0);
+    for law in [1u16, 0] {
+        let before = b.io.torque_ref_pct();
+        write_holding(&mut b, LAW, law);
+        let t = torques(&mut b, 3000);
+        assert!(largest_step(before, &t) <= 0.2 + 1e-4, "law {law}");
+        let worst = (0..3000)
+            .map(|_| {
+                run(&mut b, 1);
+                (b.io.bench.signals().pressure_mca - 3.0).abs()
+            })
+            .fold(0.0f32, f32::max);
+        assert!(worst < 0.06, "law {law}: {worst} mca off after 3 s");
+    }
+}
+
+#[test]
+fn manual_from_pressure_control_holds_the_torque_until_a_setpoint_is_written() {
+    let mut b = holding_pressure(3.0);
+    let held = b.io.torque_ref_pct();
+    write_holding(&mut b, MODE, 1); // register 0 still holds 0 %
+    let t = torques(&mut b, 2000);
+    assert!(t.iter().all(|&u| (u - held).abs() < 1e-4), "held at {held}");
+    write_holding(&mut b, 0, 3000);
+    let t = torques(&mut b, 1000);
+    assert_eq!(t[t.len() - 1], 30.0, "the new manual setpoint");
+}
+
+#[test]
+fn a_stop_takes_at_most_2_s_whatever_the_loop_rate_and_shows_running_meanwhile() {
+    let mut b = holding_pressure(3.0);
+    write_holding(&mut b, 12, 1); // 0.1 %/s for the loop
+    write_holding(&mut b, MODE, 0);
+    run(&mut b, 50);
+    assert!(b.io.torque_ref_pct() > 0.0);
+    assert!(status(&mut b).running, "running while a torque is applied");
+    run(&mut b, 2000);
+    assert_eq!(b.io.torque_ref_pct(), 0.0);
+    assert!(!status(&mut b).running);
+}
+
+#[test]
+fn the_reference_waits_while_the_torque_cannot_reach_it() {
+    let mut b = holding_pressure(3.0);
+    write_holding(&mut b, TORQUE_MAX, 3500);
+    write_holding(&mut b, PRESSURE_SP, 6000);
+    run(&mut b, 5000);
+    assert!(status(&mut b).limited);
+    write_holding(&mut b, PRESSURE_SP, 1500);
+    let t = torques(&mut b, 2000);
+    let off = t.iter().position(|&u| u < 35.0 - 1e-3).unwrap_or(t.len());
+    eprintln!("off the 35 % limit {off} ms after the setpoint came within reach");
+    // With the reference run on to 6 mca it took 450 ms (the review's measurement).
+    assert!(off < 300, "off the limit after {off} ms");
+}
