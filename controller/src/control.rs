@@ -308,7 +308,7 @@ pub struct Commands {
     pub stop_writes: u16,
     /// The protections (holding registers 5..=7).
     pub protection: ProtectionConfig,
-    /// The pressure and flow loops' settings (holding registers 8..=14).
+    /// The pressure and flow loops' settings (holding registers 8..=16).
     pub control: ControlSettings,
 }
 

@@ -19,7 +19,9 @@
 //! printable ASCII ended by `\n` (a `\r` before it is ignored), fields separated by spaces
 //! (runs of spaces or tabs count as one). The plant sends one request line, the controller
 //! answers exactly one reply line, and sends nothing else: a plant always knows which reply
-//! is whose. [`PlantSession`] is the controller's side, byte in, reply out, the same code on
+//! is whose. A plant waits for each reply before its next line (lockstep): the QEMU board
+//! queues at most 3 replies and 1 KiB of received bytes, so a plant that runs ahead of it
+//! loses replies there (the host does not). [`PlantSession`] is the controller's side, byte in, reply out, the same code on
 //! the host and the MCU; [`Request`] and [`Reply`] format and parse both directions for a
 //! plant written in Rust.
 //!
@@ -285,7 +287,7 @@ pub enum Request {
     Frame(PlantFrame),
     /// `W <register> <value>`: a holding-register write.
     Write {
-        /// Holding register address (0..=65535; the map has 0..=14).
+        /// Holding register address (0..=65535; the map has 0..=16).
         register: u16,
         /// The value (0..=65535).
         value: u16,

@@ -5,7 +5,7 @@
 //!
 //! | input register (FC 04) | meaning | unit |
 //! |---|---|---|
-//! | 0 | status bits: 0 running (commanded to run and not held at 0 % by a trip), 1 any alarm, 2 model extrapolating, 3 VFD link ok (the torque reference is delivered), 4 pressure transmitter fault, 5 flow transmitter fault, 6 VFD readings invalid (reads fail: registers 14-16 read 0), 7 tripped (the torque is held at 0 %: [`crate::protect`]), 8 saturated (a value in this map is beyond its register's range and reads as the range's end), 9 in control (mode 3 or 4 acting), 10 limited (the loop's torque at a limit or its rate), 11 virtual measurement (the loop acts on the observer's flow or pressure: its transmitter in fault), 12 control held (pressure lost and the observer's not trustworthy: the last torque held, any-alarm set), 13 the loop holds a flow (registers 26, 27 in 0.01 l/s) | |
+//! | 0 | status bits: 0 running (commanded to run and not held at 0 % by a trip, or a torque still applied), 1 any alarm, 2 model extrapolating, 3 VFD link ok (the torque reference is delivered), 4 pressure transmitter fault, 5 flow transmitter fault, 6 VFD readings invalid (reads fail: registers 14-16 read 0), 7 tripped (the torque is held at 0 %: [`crate::protect`]), 8 saturated (a value in this map is beyond its register's range and reads as the range's end), 9 in control (mode 3 or 4 acting), 10 limited (the loop's torque at a limit or its rate), 11 virtual measurement (the loop acts on the observer's flow or pressure: its transmitter in fault), 12 control held (pressure lost and the observer's not trustworthy: the last torque held, any-alarm set), 13 the loop holds a flow (registers 26, 27 in 0.01 l/s) | |
 //! | 1 | applied torque reference | 0.01 % |
 //! | 2 | measured pressure | 0.001 mca, signed |
 //! | 3 | measured flow | 0.01 l/s |
@@ -33,7 +33,7 @@
 //! | 25 | observer valve coefficient k2, as 20 in 1e-4 (the observer's whole 0.02..1) | 1e-4 |
 //! | 26 | loop's active setpoint (the setpoint's reference model): 0.001 mca, or 0.01 l/s with status bit 13 (mode 4); 0 in other modes | signed |
 //! | 27 | loop's control error (active setpoint − measured), as 26 | signed |
-//! | 28 | loop's feedforward part | 0.01 %, signed |
+//! | 28 | loop's feedforward part (the steady torque and its lead while the reference moves: may exceed 100 %) | 0.01 %, signed |
 //! | 29 | loop's integral part | 0.01 %, signed |
 //!
 //! | holding register (FC 03, 06, 16) | meaning | range |
@@ -50,7 +50,7 @@
 //! | 9 | flow setpoint of mode 4, 0.01 l/s | 0..=65535 |
 //! | 10 | torque low limit of modes 3 and 4, 0.01 % (default 0) | 0..=10000, below 11 |
 //! | 11 | torque high limit of modes 3 and 4, 0.01 % (default 10000) | 0..=10000, above 10 |
-//! | 12 | torque rate limit of modes 3 and 4 and of every mode switch, 0.1 %/s (default 2000) | 1..=65535 |
+//! | 12 | torque rate limit of modes 3 and 4, 0.1 %/s (default 2000); a mode switch and the VFD link's return move at this rate or 50 %/s, the faster | 1..=65535 |
 //! | 13 | setpoint filter of modes 3 and 4 (the reference model's time constant), ms (default 250; 0: none) | 0..=10000 |
 //! | 14 | law of modes 3 and 4: 0 model-based (feedforward and scheduled PI), 1 PI alone (one gain set) | 0..=1 |
 //! | 15 | pressure transmitter's time constant (its damping) and the lags the loop does not model (the drive's), ms (default 50): the loop compares its reading with the reference lagged as much | 0..=10000 |
@@ -395,7 +395,7 @@ pub struct ScadaSlave {
     pub stop_writes: u16,
     /// The protections (holding registers 5..=7).
     pub protection: ProtectionConfig,
-    /// The loops' settings (holding registers 8..=14).
+    /// The loops' settings (holding registers 8..=16).
     pub control: ControlRegisters,
 }
 

@@ -84,7 +84,8 @@ pub struct ControlSettings {
     pub torque_min_pct: f32,
     /// Highest torque reference the loops give, % (0..=100).
     pub torque_max_pct: f32,
-    /// Torque rate limit of the loops and of every mode switch, %/s (0.1..=6 553.5).
+    /// Torque rate limit of the loops, %/s (0.1..=6 553.5); a mode switch moves at this rate
+    /// or [`crate::control::SWITCH_RATE_MIN_PCT_PER_S`], the faster.
     pub rate_pct_per_s: f32,
     /// Time constant of the setpoint's first-order reference model, s (0..=10; 0: the
     /// setpoint goes straight in).
@@ -156,7 +157,8 @@ impl Arithmetic {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Status {
-    /// Bit 0: the drive is commanded to run (and not held at 0 % by a trip).
+    /// Bit 0: the drive is commanded to run (and not held at 0 % by a trip), or a torque is
+    /// still applied (a stop's ramp).
     pub running: bool,
     /// Bit 1: any alarm.
     pub any_alarm: bool,
