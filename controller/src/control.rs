@@ -647,6 +647,17 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             self.regulator = None;
             self.last_mode = Some(mode);
             self.last_law = c.control.law;
+            // The loop's flags and published parts, until a loop sets them again (once here,
+            // not every step: the tick's mean is within a few instructions of its budget).
+            self.virtual_measurement = false;
+            self.control_held = false;
+            let o = &mut self.out;
+            (
+                o.active_setpoint,
+                o.control_error,
+                o.feedforward_pct,
+                o.integral_pct,
+            ) = (0.0, 0.0, 0.0, 0.0);
         }
         // The reference was not delivered while the link was down (0 % applied): the loop,
         // frozen meanwhile, goes on from the applied torque at its next control tick
@@ -656,10 +667,6 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
         if link_back {
             self.resume = true;
             self.transfer = true;
-        }
-        if !mode.regulates() {
-            self.virtual_measurement = false;
-            self.control_held = false;
         }
         let wanted = match mode {
             Mode::Stop => {
@@ -741,6 +748,7 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
         let Some((pressure, flow)) = readings else {
             return self
                 .regulator
+                .as_ref()
                 .map_or(self.last_requested_pct, |r| r.last().torque_pct);
         };
         let s = &inp.commands.control;
@@ -956,19 +964,22 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             vfd_readings_invalid: blind,
             tripped: self.protection.tripped(),
             in_control: self.regulator.is_some() && link_ok && !self.control_held && !self.hold,
-            limited: self.regulator.is_some_and(|r| r.last().limited),
+            limited: self.regulator.as_ref().is_some_and(|r| r.last().limited),
             virtual_measurement: self.virtual_measurement,
             control_held: self.control_held,
             holds_flow: self
                 .regulator
+                .as_ref()
                 .is_some_and(|r| r.controlled() == Controlled::Flow),
         }
         .bits();
-        let l = self.regulator.map(|r| r.last());
-        o.active_setpoint = l.map_or(0.0, |l| l.reference);
-        o.control_error = l.map_or(0.0, |l| l.error);
-        o.feedforward_pct = l.map_or(0.0, |l| l.feedforward_pct);
-        o.integral_pct = l.map_or(0.0, |l| l.integral_pct);
+        if let Some(r) = &self.regulator {
+            let l = r.last();
+            o.active_setpoint = l.reference;
+            o.control_error = l.error;
+            o.feedforward_pct = l.feedforward_pct;
+            o.integral_pct = l.integral_pct;
+        }
         o.torque_pct = u;
         o.vfd_speed_rpm = readings.speed_rpm;
         o.vfd_torque_pct = readings.torque_pct;
