@@ -372,30 +372,6 @@ pub fn command(data: &Path, precision: Precision, output: Option<&Path>) -> Resu
 
 /// Draws the figure into a temporary file beside `png` and renames it into place.
 fn draw(png: &Path, rec: &Record, p: &PlotData, precision: Precision) -> Result<(), Failure> {
-    let fail = |e: String| Failure {
-        code: 1,
-        message: format!("cannot draw {}: {e}", png.display()),
-    };
-    let dir = match png.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
-    let name = png
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    // The encoder picks the format by the extension: the temporary file ends in .png too.
-    let tmp = tempfile::Builder::new()
-        .prefix(&format!(".{name}.partial-"))
-        .suffix(".png")
-        .tempfile_in(dir)
-        .map_err(|e| fail(e.to_string()))?;
-    {
-        use std::os::unix::fs::PermissionsExt;
-        let mode = std::fs::metadata(png).map_or(0o644, |m| m.permissions().mode());
-        std::fs::set_permissions(tmp.path(), std::fs::Permissions::from_mode(mode))
-            .map_err(|e| fail(e.to_string()))?;
-    }
     // Truth rows follow the plotted rows.
     let truth = |i: usize| -> Option<Vec<Option<f64>>> {
         rec.truth[i]
@@ -444,7 +420,7 @@ fn draw(png: &Path, rec: &Record, p: &PlotData, precision: Precision) -> Result<
             Precision::F32 => "f32",
         }
     );
-    plots::observe_figure(tmp.path(), &title, &p.t, &panels, &p.alarms).map_err(fail)?;
-    tmp.persist(png).map_err(|e| fail(e.error.to_string()))?;
-    Ok(())
+    plots::write_png(png, |tmp| {
+        plots::observe_figure(tmp, &title, &p.t, &panels, &p.alarms)
+    })
 }

@@ -23,6 +23,41 @@ const MEASURED: RGBColor = RGBColor(40, 40, 40);
 const MODEL: RGBColor = RGBColor(214, 39, 40);
 const POINTS: RGBColor = RGBColor(31, 119, 180);
 
+/// Writes the PNG `png` through a temporary file beside it (its name ending in `.png`: the
+/// encoder picks the format by the extension), renamed into place once `draw` has written it
+/// there: a failed draw leaves no partial file, and an existing file's permissions are kept.
+pub(crate) fn write_png(
+    png: &Path,
+    draw: impl FnOnce(&Path) -> Result<(), String>,
+) -> Result<(), Failure> {
+    let fail = |e: String| Failure {
+        code: 1,
+        message: format!("cannot draw {}: {e}", png.display()),
+    };
+    let dir = match png.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    let name = png
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let tmp = tempfile::Builder::new()
+        .prefix(&format!(".{name}.partial-"))
+        .suffix(".png")
+        .tempfile_in(dir)
+        .map_err(|e| fail(e.to_string()))?;
+    {
+        use std::os::unix::fs::PermissionsExt;
+        let mode = std::fs::metadata(png).map_or(0o644, |m| m.permissions().mode());
+        std::fs::set_permissions(tmp.path(), std::fs::Permissions::from_mode(mode))
+            .map_err(|e| fail(e.to_string()))?;
+    }
+    draw(tmp.path()).map_err(fail)?;
+    tmp.persist(png).map_err(|e| fail(e.error.to_string()))?;
+    Ok(())
+}
+
 /// Registers the embedded font as `sans-serif` (once per process).
 pub(crate) fn font() -> Result<(), Failure> {
     static DONE: OnceLock<bool> = OnceLock::new();

@@ -131,25 +131,8 @@ pub fn draw(
     runs: &[(Trace, Vec<EventFigures>)],
 ) -> Result<(), Failure> {
     plots::font()?;
-    let fail = |e: String| Failure {
-        code: 1,
-        message: format!("cannot draw {}: {e}", png.display()),
-    };
-    let dir = match png.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
-    let name = png
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let tmp = tempfile::Builder::new()
-        .prefix(&format!(".{name}.partial-"))
-        .suffix(".png")
-        .tempfile_in(dir)
-        .map_err(|e| fail(e.to_string()))?;
-    let draw = || -> Drawn {
-        let root = BitMapBackend::new(tmp.path(), (1600, 1000)).into_drawing_area();
+    let draw = |tmp: &Path| -> Drawn {
+        let root = BitMapBackend::new(tmp, (1600, 1000)).into_drawing_area();
         root.fill(&WHITE)?;
         let root = root.titled(
             &format!(
@@ -189,7 +172,5 @@ pub fn draw(
         root.present()?;
         Ok(())
     };
-    draw().map_err(|e| fail(e.to_string()))?;
-    tmp.persist(png).map_err(|e| fail(e.error.to_string()))?;
-    Ok(())
+    plots::write_png(png, |tmp| draw(tmp).map_err(|e| e.to_string()))
 }
