@@ -53,8 +53,8 @@
 //! | 12 | torque rate limit of modes 3 and 4, 0.1 %/s (default 2000); a mode switch and the VFD link's return move at this rate or 50 %/s, the faster | 1..=65535 |
 //! | 13 | setpoint filter of modes 3 and 4 (the reference model's time constant), ms (default 250; 0: none) | 0..=10000 |
 //! | 14 | law of modes 3 and 4: 0 model-based (feedforward and scheduled PI), 1 PI alone (one gain set) | 0..=1 |
-//! | 15 | pressure transmitter's time constant (its damping) and the lags the loop does not model (the drive's), ms (default 50): the loop compares its reading with the reference lagged as much | 0..=10000 |
-//! | 16 | flow transmitter's time constant, ms (default 150) | 0..=10000 |
+//! | 15 | pressure transmitter's time constant (its damping) and the lags the loop does not model (the drive's), ms (default 80): the loop compares its reading with the reference lagged as much | 0..=10000 |
+//! | 16 | flow transmitter's time constant and the lags the loop does not model, ms (default 250) | 0..=10000 |
 //!
 //! Holding registers 3 and 4 exist only with a virtual bench ([`ScadaSlave::with_virtual_bench`]):
 //! on a board without one they answer exception 02 like any address outside the map, and so
@@ -159,8 +159,8 @@ impl ControlRegisters {
         rate: 2000,
         filter_ms: 250,
         law: 0,
-        pressure_lag_ms: 50,
-        flow_lag_ms: 150,
+        pressure_lag_ms: 80,
+        flow_lag_ms: 250,
     };
 
     /// The settings in the core's units.

@@ -101,9 +101,9 @@ pub struct ControlSettings {
 
 impl ControlSettings {
     /// Defaults: setpoints 0, torque 0..=100 %, 200 %/s, a 0.25 s setpoint filter, the
-    /// model-based law, transmitter lags of 50 ms (pressure) and 150 ms (flow): on plants of
-    /// 20..60 ms and 40..150 ms the loops held their targets better erring long than short
-    /// (docs/control.md).
+    /// model-based law, lags of 80 ms (pressure) and 250 ms (flow): on plants whose
+    /// transmitters and drives lag 20..110 ms (pressure) and 40..170 ms (flow) the loops held
+    /// their targets better erring long than short (docs/control.md).
     pub const DEFAULT: Self = Self {
         pressure_setpoint_mca: 0.0,
         flow_setpoint_lps: 0.0,
@@ -112,8 +112,8 @@ impl ControlSettings {
         rate_pct_per_s: 200.0,
         setpoint_filter_s: 0.25,
         law: ControlLaw::Model,
-        pressure_lag_s: 0.05,
-        flow_lag_s: 0.15,
+        pressure_lag_s: 0.08,
+        flow_lag_s: 0.25,
     };
 }
 

@@ -152,7 +152,7 @@ pub struct ControlArgs {
     /// Instead of the built-in plant, serve the plant protocol (`controller::plant`, version 1)
     /// on standard input and output: an external plant closes the loop in lockstep, its
     /// scenario in its own `W` lines (docs/control.md); the controller is the boards'.
-    #[arg(long, conflicts_with_all = ["scenario", "controller", "targets", "output", "plot"])]
+    #[arg(long, conflicts_with_all = ["scenario", "controller", "targets", "output", "plot", "set"])]
     pub plant_stdio: bool,
     /// The law(s) to run.
     #[arg(long, value_enum, default_value = "both")]
@@ -176,6 +176,11 @@ pub struct ControlArgs {
     /// The plant: curve error, water inertia, drive lag, pressure transmitter lag.
     #[command(flatten)]
     pub plant: PlantArgs,
+    /// A holding-register write before the run, as commissioning sets it (repeatable), e.g.
+    /// `--set 15=110` (the pressure transmitter's time constant, ms) or `--set 11=8000` (the
+    /// torque high limit, 0.01 %); a value the map refuses is an error.
+    #[arg(long, value_name = "REGISTER=VALUE")]
+    pub set: Vec<String>,
     /// First-order lag of the flow transmitter, ms (0..2000; 0: none). Default: the
     /// scenario's (flow-steps: 150), else 40.
     #[arg(long, value_name = "MS", allow_hyphen_values = true)]

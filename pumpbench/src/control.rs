@@ -527,6 +527,16 @@ pub struct Trace {
     pub rate_limit_pct_per_s: f64,
 }
 
+/// A `--set REGISTER=VALUE`: two decimal u16.
+fn parse_setting(text: &str) -> Result<(u16, u16), Failure> {
+    let bad = || Failure::usage(format!("--set {text}: must be REGISTER=VALUE, both 0..=65535"));
+    let (r, v) = text.split_once('=').ok_or_else(bad)?;
+    Ok((
+        r.trim().parse().map_err(|_| bad())?,
+        v.trim().parse().map_err(|_| bad())?,
+    ))
+}
+
 fn refused(what: &str, e: controller::modbus::Exception) -> Failure {
     Failure {
         code: 1,
@@ -578,13 +588,15 @@ pub fn built_in_plant(
 }
 
 /// Runs `scenario` with `law` on `plant` (settled at its first row: [`built_in_plant`]),
-/// starting the controller in mode 1 at `start_torque_pct` (see the module docs).
-/// `progress` is called after every period.
+/// starting the controller in mode 1 at `start_torque_pct` (see the module docs), after the
+/// holding-register writes `settings` (the commissioning: limits, rate, transmitters' time
+/// constants). `progress` is called after every period.
 pub fn run(
     plant: &mut dyn PlantSide,
     scenario: &Scenario,
     law: Law,
     start_torque_pct: f64,
+    settings: &[(u16, u16)],
     mut progress: impl FnMut(),
 ) -> Result<Trace, Failure> {
     let first = scenario.rows[0];
@@ -604,6 +616,12 @@ pub fn run(
     let mut lock = Lockstep::new(scada);
     lock.write(REG_LAW, &[law.register()])
         .map_err(|e| refused("the law", e))?;
+    for &(reg, v) in settings {
+        lock.write(reg, &[v]).map_err(|e| Failure {
+            code: 2,
+            message: format!("--set {reg}={v}: the controller refused it ({e:?})"),
+        })?;
+    }
     let u0 = (start_torque_pct.clamp(0.0, 100.0) * 100.0).round() as u16;
     lock.write(REG_TORQUE, &[u0])
         .map_err(|e| refused("the start torque", e))?;
@@ -1321,6 +1339,11 @@ pub fn command(a: ControlArgs) -> Result<(), Failure> {
         )));
     }
     let (scenario, path) = scenario_of(name, a.hold_s)?;
+    let settings = a
+        .set
+        .iter()
+        .map(|w| parse_setting(w))
+        .collect::<Result<Vec<_>, _>>()?;
     let flow_lag = match (&a.flow_lag_ms, scenario.flow_lag_ms) {
         (Some(t), _) => t.clone(),
         (None, Some(ms)) => Short(ms).to_string(),
@@ -1366,7 +1389,7 @@ pub fn command(a: ControlArgs) -> Result<(), Failure> {
     let mut runs = Vec::new();
     for &law in laws {
         let (mut plant, u0) = built_in_plant(&o, &scenario)?;
-        let trace = run(&mut plant, &scenario, law, u0, || bar.inc(1))?;
+        let trace = run(&mut plant, &scenario, law, u0, &settings, || bar.inc(1))?;
         let figs = figures(&trace, &scenario);
         runs.push((trace, figs));
     }

@@ -396,7 +396,7 @@ fn a_short_pressure_loop_on_the_built_in_plant_settles() {
     for law in [Law::Model, Law::Pi] {
         let (mut plant, u0) = built_in_plant(&PlantOptions::with_seed(5), &scenario).unwrap();
         assert!(u0 > 0.0 && u0 < 100.0, "{u0}");
-        let trace = run(&mut plant, &scenario, law, u0, || {}).unwrap();
+        let trace = run(&mut plant, &scenario, law, u0, &[], || {}).unwrap();
         assert_eq!((trace.nan_steps, trace.out_of_limits), (0, 0), "{law:?}");
         // The default rate limit (register 12: 200 %/s), up to the f32 rounding of a period's
         // 1 % change.
