@@ -529,7 +529,11 @@ pub struct Trace {
 
 /// A `--set REGISTER=VALUE`: two decimal u16.
 fn parse_setting(text: &str) -> Result<(u16, u16), Failure> {
-    let bad = || Failure::usage(format!("--set {text}: must be REGISTER=VALUE, both 0..=65535"));
+    let bad = || {
+        Failure::usage(format!(
+            "--set {text}: must be REGISTER=VALUE, both 0..=65535"
+        ))
+    };
     let (r, v) = text.split_once('=').ok_or_else(bad)?;
     Ok((
         r.trim().parse().map_err(|_| bad())?,
