@@ -1096,6 +1096,8 @@ pub fn report(
     let n = runs.first().map_or(0, |r| r.1.len());
     // Each run's figure targets: (met, all).
     let mut tally = vec![(0u32, 0u32); runs.len()];
+    // The comparisons of the default with the PI alone (met, all), tallied apart.
+    let mut compared = (0usize, 0usize);
     for i in 0..n {
         let f0 = &runs[0].1[i];
         let u = unit(f0.mode);
@@ -1196,6 +1198,8 @@ pub fn report(
                 if with_targets {
                     let pass = matches!((sa, sb), (Some(x), Some(y)) if x < y)
                         || matches!((sa, sb), (Some(_), None));
+                    compared.1 += 1;
+                    compared.0 += usize::from(pass);
                     let _ = write!(
                         s,
                         "   target: default faster on every upward step {}",
@@ -1207,6 +1211,8 @@ pub fn report(
         }
         if let ([(_, a), (_, b)], true) = (runs, with_targets) {
             if let (Some(x), Some(y)) = (a[i].iae, b[i].iae) {
+                compared.1 += 1;
+                compared.0 += usize::from(x <= y);
                 let _ = writeln!(
                     s,
                     "  IAE model / pi = {:.3}   target: no worse than pi {}",
@@ -1223,6 +1229,14 @@ pub fn report(
                 s,
                 "{}: {pass} of the {all} figure targets above met",
                 trace.law.name()
+            );
+        }
+        if compared.1 > 0 {
+            let _ = writeln!(
+                s,
+                "model against pi: {} of the {} comparisons above met (default faster on every \
+                 upward step, IAE no worse)",
+                compared.0, compared.1
             );
         }
         for (trace, _) in runs {

@@ -276,3 +276,26 @@ fn an_external_plant_closes_the_loop_through_plant_stdio() {
     );
     assert_eq!(replies[7], "B");
 }
+
+/// With both laws, the comparisons with the PI alone are tallied apart from the figure
+/// targets, and the tally agrees with the PASS and MISS printed on their lines.
+#[test]
+fn the_comparisons_with_the_pi_alone_are_tallied() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = write(dir.path(), "s.csv", SHORT);
+    let out = pumpbench(&["control", "--scenario", &s, "--hold-s", "2", "--targets"]);
+    let stdout = ok(&out, "control --targets");
+    let lines = stdout
+        .lines()
+        .filter(|l| l.contains("target: default faster") || l.contains("target: no worse than pi"));
+    let (met, all) = lines.fold((0, 0), |(m, a), l| {
+        (m + usize::from(l.ends_with("PASS")), a + 1)
+    });
+    assert!(all >= 2, "{stdout}");
+    assert!(
+        stdout.contains(&format!(
+            "model against pi: {met} of the {all} comparisons above met"
+        )),
+        "{stdout}"
+    );
+}
