@@ -120,6 +120,21 @@ pub fn electromagnetic_torque_pct<T: Real>(gamma: &[T; 6], torque_ref_pct: T) ->
     ((((gamma[0] * u + gamma[1]) * u + gamma[2]) * u + gamma[3]) * u + gamma[4]) * u + gamma[5]
 }
 
+/// The slope of eq. (4), `dTe/du`, % per % (what the reference's inverse and the bench's
+/// linearisation divide by).
+#[inline]
+pub fn electromagnetic_torque_slope<T: Real>(gamma: &[T; 6], torque_ref_pct: T) -> T {
+    let u = torque_ref_pct;
+    let (five, four, three, two) = (
+        T::from_f64(5.0),
+        T::from_f64(4.0),
+        T::from_f64(3.0),
+        T::from_f64(2.0),
+    );
+    (((five * gamma[0] * u + four * gamma[1]) * u + three * gamma[2]) * u + two * gamma[3]) * u
+        + gamma[4]
+}
+
 /// Eq. (5): pump head `F_H(ω, Q) = α1 Q³ + α2 ω³ + α3 Q²ω + α4 Qω² + α5 Q² + α6 ω² + α7 Qω
 /// + α8 Q + α9 ω + α10`, in mca, with ω in rpm and Q in l/s.
 ///
@@ -513,6 +528,18 @@ mod tests {
             (analytic - numeric).abs() <= 1e-6 * analytic.abs().max(1.0),
             "{what}: {analytic} against {numeric}"
         );
+    }
+
+    #[test]
+    fn the_torque_slope_is_eq_4s_derivative() {
+        let p = BenchParams::<f64>::PAPER;
+        for u in (0..=20).map(|k| f64::from(k) * 5.0) {
+            close(
+                electromagnetic_torque_slope(&p.gamma, u),
+                numeric(|u| electromagnetic_torque_pct(&p.gamma, u), u, 1e-4),
+                "dTe/du",
+            );
+        }
     }
 
     #[test]

@@ -18,8 +18,9 @@
 //! A target the bench cannot reach inside 0..=100 % gives the nearest limit, flagged.
 
 use crate::equations::{
-    electromagnetic_torque_pct, flow_root_sensitivities, load_torque_partials, pump_head_mca,
-    pump_head_partials, scaled_load_torque_pct, system_k, valve_flow_lps, valve_pressure_mca,
+    electromagnetic_torque_pct, electromagnetic_torque_slope, flow_root_sensitivities,
+    load_torque_partials, pump_head_mca, pump_head_partials, scaled_load_torque_pct, system_k,
+    valve_flow_lps, valve_pressure_mca,
 };
 use crate::error::BenchError;
 use crate::params::BenchParams;
@@ -74,26 +75,9 @@ pub fn steady_torque<T: Real>(
     load: Load<T>,
     target: Target<T>,
 ) -> Result<SteadyInverse<T>, BenchError> {
-    let positive = |x: T| x.is_finite() && x > T::ZERO;
-    if !(positive(load.valve_k2) && positive(load.head_scale) && positive(load.torque_scale)) {
-        return Err(BenchError::InvalidParameter(
-            "the load's k2 and curve scales must be finite and > 0",
-        ));
-    }
-    let c = p.static_head_c_mca;
-    let (flow, pressure) = match target {
-        Target::PressureMca(h) if h.is_finite() => (valve_flow_lps(load.valve_k2, c, h), h),
-        Target::FlowLps(q) if q.is_finite() && q >= T::ZERO => {
-            (q, valve_pressure_mca(load.valve_k2, c, q))
-        }
-        _ => {
-            return Err(BenchError::InvalidParameter(
-                "the target must be finite (a flow >= 0)",
-            ))
-        }
-    };
-    // Step 2: the head the pump must give, then the lowest speed that gives it.
-    let head = (system_k(p.pipe_k1, load.valve_k2) * flow * flow - c) / load.head_scale;
+    // Steps 1 and 2: the flow, the pressure, the head the pump must give; then the lowest
+    // speed that gives it.
+    let (flow, pressure, head) = operating_point(p, load, target)?;
     let speed = match lowest_root(T::ZERO, T::from_f64(STEADY_SEARCH_MAX_RPM), |w| {
         pump_head_mca(&p.alpha, w, flow) - head
     }) {
@@ -142,6 +126,35 @@ pub fn steady_torque_near<T: Real>(
     newton(p, load, target, near).ok_or(BenchError::NoSteadyState)
 }
 
+/// Step 1 and the head of step 2 (module docs): the flow and the pressure of `target` against
+/// `load`, and the head the pump must give there, mca. The errors of [`steady_torque`].
+fn operating_point<T: Real>(
+    p: &BenchParams<T>,
+    load: Load<T>,
+    target: Target<T>,
+) -> Result<(T, T, T), BenchError> {
+    let positive = |x: T| x.is_finite() && x > T::ZERO;
+    if !(positive(load.valve_k2) && positive(load.head_scale) && positive(load.torque_scale)) {
+        return Err(BenchError::InvalidParameter(
+            "the load's k2 and curve scales must be finite and > 0",
+        ));
+    }
+    let c = p.static_head_c_mca;
+    let (flow, pressure) = match target {
+        Target::PressureMca(h) if h.is_finite() => (valve_flow_lps(load.valve_k2, c, h), h),
+        Target::FlowLps(q) if q.is_finite() && q >= T::ZERO => {
+            (q, valve_pressure_mca(load.valve_k2, c, q))
+        }
+        _ => {
+            return Err(BenchError::InvalidParameter(
+                "the target must be finite (a flow >= 0)",
+            ))
+        }
+    };
+    let head = (system_k(p.pipe_k1, load.valve_k2) * flow * flow - c) / load.head_scale;
+    Ok((flow, pressure, head))
+}
+
 /// Most Newton iterations of [`steady_torque_near`] per unknown.
 pub const NEWTON_ITERATIONS: usize = 12;
 
@@ -155,31 +168,20 @@ fn newton<T: Real>(
     target: Target<T>,
     near: &SteadyInverse<T>,
 ) -> Option<SteadyInverse<T>> {
-    let positive = |x: T| x.is_finite() && x > T::ZERO;
-    if !(positive(load.valve_k2) && positive(load.head_scale) && positive(load.torque_scale)) {
+    let (flow, pressure, head) = operating_point(p, load, target).ok()?;
+    if !(flow.is_finite() && flow > T::ZERO) {
         return None;
     }
-    let c = p.static_head_c_mca;
-    let (flow, pressure) = match target {
-        Target::PressureMca(h) if h.is_finite() => (valve_flow_lps(load.valve_k2, c, h), h),
-        Target::FlowLps(q) if q.is_finite() && q >= T::ZERO => {
-            (q, valve_pressure_mca(load.valve_k2, c, q))
-        }
-        _ => return None,
-    };
-    if !positive(flow) {
-        return None;
-    }
-    let head = (system_k(p.pipe_k1, load.valve_k2) * flow * flow - c) / load.head_scale;
     // Tolerances: 1e-5 of the value's scale, well under what a transmitter resolves (one
     // ADC code is 3.4 mm of water) and above f32's rounding of the sums.
     let tol = T::from_f64(1e-5);
     let max_rpm = T::from_f64(STEADY_SEARCH_MAX_RPM);
-    let mut w = if positive(near.speed_rpm) && near.speed_rpm < max_rpm {
-        near.speed_rpm
-    } else {
-        T::from_f64(NEWTON_START_RPM)
-    };
+    let mut w =
+        if near.speed_rpm.is_finite() && near.speed_rpm > T::ZERO && near.speed_rpm < max_rpm {
+            near.speed_rpm
+        } else {
+            T::from_f64(NEWTON_START_RPM)
+        };
     // Safeguarded Newton: a step that leaves the bracket the signs have shown bisects it.
     let (mut lo, mut hi) = (T::ZERO, max_rpm);
     let mut done = false;
@@ -227,12 +229,7 @@ fn newton<T: Real>(
         // The least the drive gives already holds it (the scan's `Root::Below`).
         return Some(at(T::ZERO, w > T::ZERO || torque < gm[5]));
     }
-    let (five, four, three, two) = (
-        T::from_f64(5.0),
-        T::from_f64(4.0),
-        T::from_f64(3.0),
-        T::from_f64(2.0),
-    );
+    let two = T::from_f64(2.0);
     let mut u = if near.torque_ref_pct > T::ZERO && near.torque_ref_pct < full {
         near.torque_ref_pct
     } else {
@@ -252,8 +249,7 @@ fn newton<T: Real>(
         } else {
             hi = u;
         }
-        let slope =
-            (((five * gm[0] * u + four * gm[1]) * u + three * gm[2]) * u + two * gm[3]) * u + gm[4];
+        let slope = electromagnetic_torque_slope(gm, u);
         let next = u - g / slope;
         u = if slope > T::ZERO && next > lo && next < hi {
             next
@@ -298,20 +294,12 @@ pub fn linearise<T: Real>(
         return None;
     }
     let u = at.torque_ref_pct;
-    let g = &p.gamma;
-    let (five, four, three, two) = (
-        T::from_f64(5.0),
-        T::from_f64(4.0),
-        T::from_f64(3.0),
-        T::from_f64(2.0),
-    );
-    // dTe/du of eq. (4).
-    let dte_du = (((five * g[0] * u + four * g[1]) * u + three * g[2]) * u + two * g[3]) * u + g[4];
+    let dte_du = electromagnetic_torque_slope(&p.gamma, u);
     let dw_du = dte_du / dtl_dw;
     let flow_gain = dq_dw * dw_du;
     Some(Linearisation {
         time_constant_s: T::ONE / (p.accel_rpm_per_s_per_pct() * dtl_dw),
-        pressure_gain_mca_per_pct: two * load.valve_k2 * load.valve_k2 * q * flow_gain,
+        pressure_gain_mca_per_pct: T::from_f64(2.0) * load.valve_k2 * load.valve_k2 * q * flow_gain,
         flow_gain_lps_per_pct: flow_gain,
     })
 }
