@@ -23,6 +23,24 @@ const MEASURED: RGBColor = RGBColor(40, 40, 40);
 const MODEL: RGBColor = RGBColor(214, 39, 40);
 const POINTS: RGBColor = RGBColor(31, 119, 180);
 
+/// The figures' legend: a white box at `position`, the series' labels in 15 px.
+pub(crate) fn legend<'a, DB, CT>(
+    chart: &mut ChartContext<'a, DB, CT>,
+    position: SeriesLabelPosition,
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>>
+where
+    DB: DrawingBackend + 'a,
+    CT: CoordTranslate,
+{
+    chart
+        .configure_series_labels()
+        .position(position)
+        .label_font((FONT, 15))
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .draw()
+}
+
 /// Writes the PNG `png` through a temporary file beside it (its name ending in `.png`: the
 /// encoder picks the format by the extension), renamed into place once `draw` has written it
 /// there: a failed draw leaves no partial file, and an existing file's permissions are kept.
@@ -145,13 +163,7 @@ fn time_panel(
         ))?
         .label(model_label)
         .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], MODEL.stroke_width(2)));
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperRight)
-        .label_font((FONT, 15))
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .draw()?;
+    legend(&mut chart, SeriesLabelPosition::UpperRight)?;
     Ok(())
 }
 
@@ -242,13 +254,7 @@ fn static_panel(
         .draw_series(points.iter().map(|&p| Circle::new(p, 5, POINTS.filled())))?
         .label("steady-state points")
         .legend(|(x, y)| Circle::new((x + 10, y), 5, POINTS.filled()));
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperLeft)
-        .label_font((FONT, 15))
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .draw()?;
+    legend(&mut chart, SeriesLabelPosition::UpperLeft)?;
     Ok(())
 }
 
@@ -424,13 +430,7 @@ fn observe_panel(area: &Area, t: &[f64], p: &ObservePanel, alarms: &[(f64, f64)]
     lines(truth, TRUTH.stroke_width(2), "truth")?;
     let estimate: Vec<Option<f64>> = p.estimate.iter().map(|&v| Some(v)).collect();
     lines(runs(t, &estimate), MODEL.stroke_width(1), "estimate")?;
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperRight)
-        .label_font((FONT, 15))
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .draw()?;
+    legend(&mut chart, SeriesLabelPosition::UpperRight)?;
     Ok(())
 }
 

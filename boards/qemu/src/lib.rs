@@ -9,6 +9,7 @@ pub mod args;
 
 use defmt_semihosting as _;
 use stm32f4xx_hal::pac;
+use stm32f4xx_hal::serial::{Rx, Serial, Tx};
 
 /// SysTick under QEMU, Hz (QEMU clocks it at 168 MHz whatever the RCC says).
 pub const QEMU_SYSTICK_HZ: u32 = 168_000_000;
@@ -65,3 +66,35 @@ pub fn start_time_bases(rcc: &pac::RCC, tim2: &pac::TIM2, tim5: &pac::TIM5) {
 
 /// Ends the QEMU run: exit status 0 (`true`) or 1.
 pub use board_common::semihosting::exit;
+
+/// The board's two serial ports, receive interrupts on: USART1 (SCADA) and USART2 (the VFD
+/// link, or the plant line of the plant-mode image).
+pub struct Usarts {
+    /// USART1's transmitter.
+    pub tx1: Tx<pac::USART1>,
+    /// USART1's receiver.
+    pub rx1: Rx<pac::USART1>,
+    /// USART2's transmitter.
+    pub tx2: Tx<pac::USART2>,
+    /// USART2's receiver.
+    pub rx2: Rx<pac::USART2>,
+}
+
+/// The start both images share: the time bases ([`start_time_bases`]), the clock on the HSI
+/// (16 MHz: QEMU hangs on a PLL-ready wait), USART1 on PA9/PA10 and USART2 on PA2/PA3 at
+/// `baud` with their receive interrupts on. The error names the port that refused.
+pub fn start_usarts(dp: pac::Peripherals, baud: u32) -> Result<Usarts, &'static str> {
+    use stm32f4xx_hal::prelude::*;
+    start_time_bases(&dp.RCC, &dp.TIM2, &dp.TIM5);
+    let mut rcc = dp.RCC.freeze(stm32f4xx_hal::rcc::Config::hsi());
+    let gpioa = dp.GPIOA.split(&mut rcc);
+    let s1 = Serial::new(dp.USART1, (gpioa.pa9, gpioa.pa10), baud.bps(), &mut rcc)
+        .map_err(|_| "USART1")?;
+    let s2 = Serial::new(dp.USART2, (gpioa.pa2, gpioa.pa3), baud.bps(), &mut rcc)
+        .map_err(|_| "USART2")?;
+    let (tx1, mut rx1) = s1.split();
+    let (tx2, mut rx2) = s2.split();
+    rx1.listen();
+    rx2.listen();
+    Ok(Usarts { tx1, rx1, tx2, rx2 })
+}

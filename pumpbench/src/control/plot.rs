@@ -114,13 +114,7 @@ fn panel(
             .label(tr.law.name())
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperRight)
-        .label_font((FONT, 15))
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .draw()?;
+    plots::legend(&mut chart, SeriesLabelPosition::UpperRight)?;
     Ok(())
 }
 

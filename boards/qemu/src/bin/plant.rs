@@ -47,9 +47,7 @@ mod app {
     use controller::types::Published;
     use heapless::spsc::Queue;
     use rtic_sync::channel::{Receiver, Sender};
-    use stm32f4xx_hal::prelude::*;
-    use stm32f4xx_hal::rcc::Config as RccConfig;
-    use stm32f4xx_hal::serial::{Rx, Serial, Tx};
+    use stm32f4xx_hal::serial::{Rx, Tx};
 
     type Port1 = PortIsr<Tx<pac::USART1>, Rx<pac::USART1>, NoDe>;
     type Port2 = PortIsr<Tx<pac::USART2>, Rx<pac::USART2>, NoDe>;
@@ -90,19 +88,9 @@ mod app {
         };
         let (core, session) = board_common::plant_session().unwrap_or_else(|_| fail("controller"));
 
-        let dp = cx.device;
-        board_qemu::start_time_bases(&dp.RCC, &dp.TIM2, &dp.TIM5);
-        // HSI 16 MHz: QEMU hangs on a PLL-ready wait.
-        let mut rcc = dp.RCC.freeze(RccConfig::hsi());
-        let gpioa = dp.GPIOA.split(&mut rcc);
-        let s1 = Serial::new(dp.USART1, (gpioa.pa9, gpioa.pa10), BAUD.bps(), &mut rcc)
-            .unwrap_or_else(|_| fail("USART1"));
-        let s2 = Serial::new(dp.USART2, (gpioa.pa2, gpioa.pa3), BAUD.bps(), &mut rcc)
-            .unwrap_or_else(|_| fail("USART2"));
-        let (tx1, mut rx1) = s1.split();
-        let (tx2, mut rx2) = s2.split();
-        rx1.listen();
-        rx2.listen();
+        // The time bases (see the module docs), the clock, the two USARTs.
+        let board_qemu::Usarts { tx1, rx1, tx2, rx2 } =
+            board_qemu::start_usarts(cx.device, BAUD).unwrap_or_else(|port| fail(port));
 
         let (p1, c1) = cx.local.rx1.split();
         let (pt1, ct1) = cx.local.tx1.split();
