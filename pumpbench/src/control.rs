@@ -778,6 +778,25 @@ pub struct EventFigures {
     pub steady_error_pct: Option<f64>,
 }
 
+impl EventFigures {
+    /// An event's figures, none measured yet.
+    pub fn new(t_s: f64, mode: u16, setpoint: f64, kind: EventKind, sensors: SensorState) -> Self {
+        Self {
+            t_s,
+            mode,
+            setpoint,
+            kind,
+            sensors,
+            rise_s: None,
+            overshoot_pct: None,
+            peak_pct: None,
+            settle_s: None,
+            iae: None,
+            steady_error_pct: None,
+        }
+    }
+}
+
 /// First time at or after `t[0]` that `f(y)` reaches `level` (rising), linearly
 /// interpolated between samples; `None` if never.
 fn first_reach(t: &[f64], y: &[f64], level: f64, f: impl Fn(f64) -> f64) -> Option<f64> {
@@ -890,19 +909,7 @@ pub fn figures(trace: &Trace, scenario: &Scenario) -> Vec<EventFigures> {
             },
             Some(p) => EventKind::Disturbance(describe_change(&p, r)),
         };
-        let mut f = EventFigures {
-            t_s: t0,
-            mode: r.mode,
-            setpoint: r.setpoint,
-            kind: kind.clone(),
-            sensors: r.sensors,
-            rise_s: None,
-            overshoot_pct: None,
-            peak_pct: None,
-            settle_s: None,
-            iae: None,
-            steady_error_pct: None,
-        };
+        let mut f = EventFigures::new(t0, r.mode, r.setpoint, kind.clone(), r.sensors);
         if controlled && !t.is_empty() {
             let sp = r.setpoint;
             let tail: Vec<f64> = t

@@ -215,19 +215,13 @@ fn figures_of_a_disturbance_and_of_a_step_on_the_truth() {
 
 #[test]
 fn the_issue_targets_by_mode_kind_and_direction() {
-    let mut f = EventFigures {
-        t_s: 1.0,
-        mode: 3,
-        setpoint: 4.0,
-        kind: EventKind::Step { from: 2.0, to: 4.0 },
-        sensors: SensorState::OK,
-        rise_s: None,
-        overshoot_pct: None,
-        peak_pct: None,
-        settle_s: None,
-        iae: None,
-        steady_error_pct: None,
-    };
+    let mut f = EventFigures::new(
+        1.0,
+        3,
+        4.0,
+        EventKind::Step { from: 2.0, to: 4.0 },
+        SensorState::OK,
+    );
     let limit = |f: &EventFigures, name: &str| {
         targets(f)
             .iter()
