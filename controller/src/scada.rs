@@ -51,7 +51,7 @@
 //! | 10 | torque low limit of modes 3 and 4, 0.01 % (default 0) | 0..=10000, below 11 |
 //! | 11 | torque high limit of modes 3 and 4, 0.01 % (default 10000) | 0..=10000, above 10 |
 //! | 12 | torque rate limit of modes 3 and 4, 0.1 %/s (default 2000); a mode switch and the VFD link's return move at this rate or 50 %/s, the faster | 1..=65535 |
-//! | 13 | setpoint filter of modes 3 and 4 (the reference model's time constant), ms (default 250; 0: none) | 0..=10000 |
+//! | 13 | setpoint filter of modes 3 and 4 (the reference model's time constant), ms (default 200; 0: none) | 0..=10000 |
 //! | 14 | law of modes 3 and 4: 0 model-based (feedforward and scheduled PI), 1 PI alone (one gain set) | 0..=1 |
 //! | 15 | pressure transmitter's time constant (its damping) and the lags the loop does not model (the drive's), ms (default 80): the loop compares its reading with the reference lagged as much | 0..=10000 |
 //! | 16 | flow transmitter's time constant and the lags the loop does not model, ms (default 250) | 0..=10000 |
@@ -157,7 +157,7 @@ impl ControlRegisters {
         torque_min: 0,
         torque_max: SETPOINT_MAX,
         rate: 2000,
-        filter_ms: 250,
+        filter_ms: 200,
         law: 0,
         pressure_lag_ms: 80,
         flow_lag_ms: 250,

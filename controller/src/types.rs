@@ -100,7 +100,7 @@ pub struct ControlSettings {
 }
 
 impl ControlSettings {
-    /// Defaults: setpoints 0, torque 0..=100 %, 200 %/s, a 0.25 s setpoint filter, the
+    /// Defaults: setpoints 0, torque 0..=100 %, 200 %/s, a 0.2 s setpoint filter, the
     /// model-based law, lags of 80 ms (pressure) and 250 ms (flow): on plants whose
     /// transmitters and drives lag 20..110 ms (pressure) and 40..170 ms (flow) the loops held
     /// their targets better erring long than short (docs/control.md).
@@ -110,7 +110,7 @@ impl ControlSettings {
         torque_min_pct: 0.0,
         torque_max_pct: 100.0,
         rate_pct_per_s: 200.0,
-        setpoint_filter_s: 0.25,
+        setpoint_filter_s: 0.2,
         law: ControlLaw::Model,
         pressure_lag_s: 0.08,
         flow_lag_s: 0.25,
