@@ -297,7 +297,8 @@ impl Regulator {
         // drive lag and a 60 ms transmitter, and 27 to 36 % with a water column.)
         let moving = s.law == ControlLaw::Model
             && (setpoint - self.reference).abs() > MOVING_FRACTION * setpoint.abs().max(0.1);
-        if !(limited && (wanted - torque) * di > 0.0) && !moving {
+        let held = limited && (wanted - torque) * di > 0.0;
+        if !(held || moving) {
             self.integral_pct += di;
         }
         self.last_pct = torque;
