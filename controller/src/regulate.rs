@@ -16,12 +16,14 @@
 //!   [`MOVING_FRACTION`]) whose gains are scheduled on the bench linearised at the point
 //!   ([`model_core::inverse::linearise`]: static gain K, time constant τ, both changing ×3.5
 //!   across the range): IMC tuning of a first-order plant, `Kc = τ / (K λ)`, with
-//!   λ = [`PRESSURE_CLOSED_LOOP_S`] or [`FLOW_CLOSED_LOOP_S`], and `Ti = 0.8 τ`
+//!   λ = [`ControlSettings::pressure_closed_loop_s`] or [`ControlSettings::flow_closed_loop_s`]
+//!   ([`PRESSURE_CLOSED_LOOP_S`], [`FLOW_CLOSED_LOOP_S`] by default), and `Ti = 0.8 τ`
 //!   ([`INTEGRAL_TIME_PER_TAU`]); the error is the reference lagged by the transmitter's time
 //!   constant ([`ControlSettings::pressure_lag_s`], [`ControlSettings::flow_lag_s`]) minus the
 //!   reading;
 //! - [`ControlLaw::Pi`]: the PI alone with one gain set ([`PI_PRESSURE`], [`PI_FLOW`]: the same
-//!   IMC rule at one operating point), as a drive ships it: the comparison;
+//!   IMC rule at one operating point, the gain scaled as `1 / λ` when λ is set), as a drive
+//!   ships it: the comparison;
 //! - the torque within [`ControlSettings::torque_min_pct`]..=[`ControlSettings::torque_max_pct`]
 //!   and moving at most [`ControlSettings::rate_pct_per_s`]; the integrator is held while the
 //!   torque is held at a limit in the error's direction (conditional integration), and the
@@ -41,12 +43,14 @@ pub const CONTROL_PERIOD_MS: u32 = 5;
 /// The loops run on the ticks `t ≡ CONTROL_PHASE_MS (mod CONTROL_PERIOD_MS)`: never on an
 /// observer step's tick (those are multiples of the pressure period, 50 ms).
 pub const CONTROL_PHASE_MS: u32 = 2;
-/// Closed-loop time constant asked of the pressure PI (IMC λ), s. Chosen on `pumpbench
+/// The default closed-loop time constant asked of the pressure PI (IMC λ), s (holding
+/// register 17, [`ControlSettings::pressure_closed_loop_s`]). Chosen on `pumpbench
 /// control`'s plants (docs/control.md): 0.15 s settled the paper's bench a little faster but
 /// overshot 10 % on a bench with a 50 ms drive lag and 60 ms transmitter, where 0.2 s holds
 /// the targets better.
 pub const PRESSURE_CLOSED_LOOP_S: f32 = 0.2;
-/// Closed-loop time constant asked of the flow PI (IMC λ), s: slower than the pressure's,
+/// The default closed-loop time constant asked of the flow PI (IMC λ), s (holding register
+/// 18, [`ControlSettings::flow_closed_loop_s`]): slower than the pressure's,
 /// the flow transmitter lags more (the paper's settles in ≈ 0.1 s; 150 ms lags are common).
 pub const FLOW_CLOSED_LOOP_S: f32 = 0.3;
 /// The PI's integral time per plant time constant (IMC's is 1): a shorter integral takes a
@@ -102,17 +106,26 @@ impl Controlled {
         }
     }
 
-    fn closed_loop_s(self) -> f32 {
-        match self {
-            Controlled::Pressure => PRESSURE_CLOSED_LOOP_S,
-            Controlled::Flow => FLOW_CLOSED_LOOP_S,
-        }
+    /// The closed-loop time constant asked (λ), s, and the default it was set against.
+    fn closed_loop_s(self, s: &ControlSettings) -> (f32, f32) {
+        let (asked, default) = match self {
+            Controlled::Pressure => (s.pressure_closed_loop_s, PRESSURE_CLOSED_LOOP_S),
+            Controlled::Flow => (s.flow_closed_loop_s, FLOW_CLOSED_LOOP_S),
+        };
+        // A λ below 10 ms (or not a number) is taken as the default: no division by 0.
+        (if asked >= 0.01 { asked } else { default }, default)
     }
 
-    fn fixed_gains(self) -> PiGains {
-        match self {
+    /// The PI alone's gains: [`PI_PRESSURE`] or [`PI_FLOW`], their gain scaled as `1 / λ`.
+    fn fixed_gains(self, s: &ControlSettings) -> PiGains {
+        let g = match self {
             Controlled::Pressure => PI_PRESSURE,
             Controlled::Flow => PI_FLOW,
+        };
+        let (asked, default) = self.closed_loop_s(s);
+        PiGains {
+            kc: g.kc * default / asked,
+            ..g
         }
     }
 }
@@ -255,8 +268,8 @@ impl Regulator {
             0.0
         };
         let (ff, lead, gains) = match s.law {
-            ControlLaw::Pi => (0.0, 0.0, self.controlled.fixed_gains()),
-            ControlLaw::Model => self.model_terms(bench, load, rate),
+            ControlLaw::Pi => (0.0, 0.0, self.controlled.fixed_gains(s)),
+            ControlLaw::Model => self.model_terms(bench, load, s, rate),
         };
         // The error against the reference as the transmitter shows it: a plant that follows
         // the reference exactly gives no error while its reading lags behind it.
@@ -323,6 +336,7 @@ impl Regulator {
         &mut self,
         bench: &BenchParams<f32>,
         load: Load<f32>,
+        s: &ControlSettings,
         rate: f32,
     ) -> (f32, f32, PiGains) {
         let c = self.controlled;
@@ -331,7 +345,7 @@ impl Regulator {
             // No steady state for the reference (beyond the pump, or a load the observer has
             // not got yet): the PI alone around the last torque.
             self.load = None;
-            return (0.0, 0.0, c.fixed_gains());
+            return (0.0, 0.0, c.fixed_gains(s));
         };
         if let Some(before) = self.load.filter(|&l| l != load && !self.fresh) {
             if let Ok(old) = steady_torque_near(bench, before, target, &inv) {
@@ -341,7 +355,7 @@ impl Regulator {
         self.load = Some(load);
         self.near = inv;
         let Some(l) = linearise(bench, load, &inv) else {
-            return (inv.torque_ref_pct, 0.0, c.fixed_gains());
+            return (inv.torque_ref_pct, 0.0, c.fixed_gains(s));
         };
         let gain = match c {
             Controlled::Pressure => l.pressure_gain_mca_per_pct,
@@ -355,7 +369,7 @@ impl Regulator {
             inv.torque_ref_pct,
             tau * rate / gain,
             PiGains {
-                kc: tau / (gain * c.closed_loop_s()),
+                kc: tau / (gain * c.closed_loop_s(s).0),
                 ti_s: tau * INTEGRAL_TIME_PER_TAU,
             },
         )
@@ -400,6 +414,42 @@ mod tests {
             let ti = l.time_constant_s * INTEGRAL_TIME_PER_TAU;
             assert!((kc / gains.kc - 1.0).abs() < 0.01, "{target:?}: Kc {kc}");
             assert!((ti / gains.ti_s - 1.0).abs() < 0.01, "{target:?}: Ti {ti}");
+        }
+    }
+
+    /// Holding registers 17 and 18 (λ) reach both laws' gains: ×2.5 the time constant,
+    /// ÷2.5 the gain; the integral time is the plant's, not λ's. A λ under 10 ms is the
+    /// default (no division by 0).
+    #[test]
+    fn the_closed_loop_time_constant_scales_the_gains() {
+        let p = BenchParams::<f32>::PAPER;
+        for c in [Controlled::Pressure, Controlled::Flow] {
+            let (default, calm) = (ControlSettings::DEFAULT, {
+                let mut s = ControlSettings::DEFAULT;
+                s.pressure_closed_loop_s *= 2.5;
+                s.flow_closed_loop_s *= 2.5;
+                s
+            });
+            let (a, b) = (c.fixed_gains(&default), c.fixed_gains(&calm));
+            assert!(
+                (a.kc / b.kc - 2.5).abs() < 1e-4 && a.ti_s == b.ti_s,
+                "{a:?} {b:?}"
+            );
+            let y = if c == Controlled::Pressure { 3.0 } else { 12.0 };
+            let gains = |s: &ControlSettings| {
+                let mut r = Regulator::new(c, y, 50.0, 1300.0);
+                r.model_terms(&p, paper_load(&p), s, 0.0).2
+            };
+            let (a, b) = (gains(&default), gains(&calm));
+            assert!(
+                (a.kc / b.kc - 2.5).abs() < 1e-4 && a.ti_s == b.ti_s,
+                "{a:?} {b:?}"
+            );
+            let mut zero = ControlSettings::DEFAULT;
+            zero.pressure_closed_loop_s = 0.0;
+            zero.flow_closed_loop_s = f32::NAN;
+            assert_eq!(gains(&zero), gains(&default));
+            assert_eq!(c.fixed_gains(&zero), c.fixed_gains(&default));
         }
     }
 

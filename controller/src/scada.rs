@@ -55,6 +55,8 @@
 //! | 14 | law of modes 3 and 4: 0 model-based (feedforward and scheduled PI), 1 PI alone (one gain set) | 0..=1 |
 //! | 15 | pressure transmitter's time constant (its damping) and the lags the loop does not model (the drive's), ms (default 80): the loop compares its reading with the reference lagged as much | 0..=10000 |
 //! | 16 | flow transmitter's time constant and the lags the loop does not model, ms (default 250) | 0..=10000 |
+//! | 17 | pressure loop's closed-loop time constant (IMC λ), ms (default 200): longer is calmer, for plants with a water column or a slow drive | 10..=10000 |
+//! | 18 | flow loop's closed-loop time constant, ms (default 300) | 10..=10000 |
 //!
 //! Holding registers 3 and 4 exist only with a virtual bench ([`ScadaSlave::with_virtual_bench`]):
 //! on a board without one they answer exception 02 like any address outside the map, and so
@@ -81,9 +83,11 @@ use crate::types::{
 /// Input registers.
 pub const INPUT_REGISTERS: usize = 30;
 /// Holding registers (0..=16; 3 and 4 only with a virtual bench).
-pub const HOLDING_REGISTERS: usize = 17;
+pub const HOLDING_REGISTERS: usize = 19;
 /// Largest setpoint filter and transmitter time constant (holding registers 13, 15, 16), ms.
 pub const SETPOINT_FILTER_MAX_MS: u16 = 10_000;
+/// Holding registers 17 and 18: the closed-loop time constants accepted, ms.
+pub const CLOSED_LOOP_RANGE_MS: core::ops::RangeInclusive<u16> = 10..=10_000;
 /// The holding registers that exist only with a virtual bench.
 pub const BENCH_HOLDING_REGISTERS: core::ops::Range<usize> = 3..5;
 /// Virtual bench valve, 0.1 % of nominal k2: nominal.
@@ -147,6 +151,10 @@ pub struct ControlRegisters {
     pub pressure_lag_ms: u16,
     /// 16: flow transmitter's time constant, ms (0..=10000).
     pub flow_lag_ms: u16,
+    /// 17: pressure loop's closed-loop time constant, ms (10..=10000).
+    pub pressure_closed_loop_ms: u16,
+    /// 18: flow loop's closed-loop time constant, ms (10..=10000).
+    pub flow_closed_loop_ms: u16,
 }
 
 impl ControlRegisters {
@@ -161,6 +169,8 @@ impl ControlRegisters {
         law: 0,
         pressure_lag_ms: 80,
         flow_lag_ms: 250,
+        pressure_closed_loop_ms: 200,
+        flow_closed_loop_ms: 300,
     };
 
     /// The settings in the core's units.
@@ -179,11 +189,13 @@ impl ControlRegisters {
             },
             pressure_lag_s: f32::from(self.pressure_lag_ms) / 1000.0,
             flow_lag_s: f32::from(self.flow_lag_ms) / 1000.0,
+            pressure_closed_loop_s: f32::from(self.pressure_closed_loop_ms) / 1000.0,
+            flow_closed_loop_s: f32::from(self.flow_closed_loop_ms) / 1000.0,
         }
     }
 
     /// The registers are consistent: limits in 0..=10000 with low < high, a rate ≥ 1, a
-    /// filter ≤ 10 s, a known law.
+    /// filter and lags ≤ 10 s, a known law, closed loops in [`CLOSED_LOOP_RANGE_MS`].
     pub fn is_valid(&self) -> bool {
         self.torque_max <= SETPOINT_MAX
             && self.torque_min < self.torque_max
@@ -192,6 +204,8 @@ impl ControlRegisters {
             && self.law <= 1
             && self.pressure_lag_ms <= SETPOINT_FILTER_MAX_MS
             && self.flow_lag_ms <= SETPOINT_FILTER_MAX_MS
+            && CLOSED_LOOP_RANGE_MS.contains(&self.pressure_closed_loop_ms)
+            && CLOSED_LOOP_RANGE_MS.contains(&self.flow_closed_loop_ms)
     }
 }
 
@@ -442,6 +456,8 @@ impl ScadaSlave {
             self.control.law,
             self.control.pressure_lag_ms,
             self.control.flow_lag_ms,
+            self.control.pressure_closed_loop_ms,
+            self.control.flow_closed_loop_ms,
         ]
     }
 
@@ -525,6 +541,8 @@ impl ScadaSlave {
                 14 if v <= 1 => next.control.law = v,
                 15 if v <= SETPOINT_FILTER_MAX_MS => next.control.pressure_lag_ms = v,
                 16 if v <= SETPOINT_FILTER_MAX_MS => next.control.flow_lag_ms = v,
+                17 if CLOSED_LOOP_RANGE_MS.contains(&v) => next.control.pressure_closed_loop_ms = v,
+                18 if CLOSED_LOOP_RANGE_MS.contains(&v) => next.control.flow_closed_loop_ms = v,
                 _ => return Err(Exception::IllegalDataValue),
             }
         }
@@ -668,7 +686,11 @@ mod tests {
         assert_eq!(exception(&mut s, &[1, 6, 0, 4, 0, 16]), 3, "fault bit 4");
         ask(&mut s, &frame(&[1, 6, 0, 4, 0, 0b1010])).unwrap();
         assert_eq!(s.faults, 0b1010);
-        assert_eq!(exception(&mut s, &[1, 3, 0, 16, 0, 2]), 2, "past the map");
+        assert_eq!(
+            exception(&mut s, &[1, 3, 0, HOLDING_REGISTERS as u8 - 1, 0, 2]),
+            2,
+            "past the map"
+        );
     }
 
     #[test]
@@ -720,6 +742,36 @@ mod tests {
             &ask(&mut bench, &frame(&[1, 3, 0, 0, 0, 8])).unwrap()[..3],
             &[1, 3, 16]
         );
+    }
+
+    /// The control registers' defaults are the core's ([`ControlSettings::DEFAULT`]: one
+    /// set of defaults, two units), registers 17 and 18 take 10..=10000 ms and nothing else,
+    /// and reach the loop in seconds.
+    #[test]
+    fn control_registers_defaults_ranges_and_units() {
+        assert_eq!(
+            ControlRegisters::DEFAULT.settings(),
+            ControlSettings::DEFAULT
+        );
+        let mut s = ScadaSlave::new(1).unwrap();
+        for reg in [17u8, 18] {
+            for bad in [0u16, 9, 10_001, u16::MAX] {
+                let [hi, lo] = bad.to_be_bytes();
+                assert_eq!(exception(&mut s, &[1, 6, 0, reg, hi, lo]), 3, "{reg}={bad}");
+            }
+            for good in [10u16, 500, 10_000] {
+                let [hi, lo] = good.to_be_bytes();
+                let w = frame(&[1, 6, 0, reg, hi, lo]);
+                assert_eq!(ask(&mut s, &w).unwrap(), w, "{reg}={good}");
+                let c = s.control.settings();
+                let got = if reg == 17 {
+                    c.pressure_closed_loop_s
+                } else {
+                    c.flow_closed_loop_s
+                };
+                assert_eq!(got, f32::from(good) / 1000.0);
+            }
+        }
     }
 
     /// Regression (defect 4 of the protection issue): register 14 held a runaway drive at
@@ -780,7 +832,7 @@ mod tests {
             "the bench's holding registers on a board"
         );
         assert_eq!(
-            exception(&mut s, &[1, 6, 0, 17, 0, 1]),
+            exception(&mut s, &[1, 6, 0, HOLDING_REGISTERS as u8, 0, 1]),
             2,
             "write past the map"
         );

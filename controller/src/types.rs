@@ -97,11 +97,18 @@ pub struct ControlSettings {
     pub pressure_lag_s: f32,
     /// The flow transmitter's time constant, s (0..=10).
     pub flow_lag_s: f32,
+    /// The closed-loop time constant asked of the pressure loop (IMC λ), s (0.01..=10): the
+    /// model's PI gains are `τ / (K λ)`, the PI alone's scale as `1 / λ`. Longer is calmer:
+    /// for plants whose lags the model lacks (a water column, a slow drive).
+    pub pressure_closed_loop_s: f32,
+    /// The same for the flow loop, s (0.01..=10).
+    pub flow_closed_loop_s: f32,
 }
 
 impl ControlSettings {
     /// Defaults: setpoints 0, torque 0..=100 %, 200 %/s, a 0.2 s setpoint filter, the
-    /// model-based law, lags of 80 ms (pressure) and 250 ms (flow): on plants whose
+    /// model-based law, lags of 80 ms (pressure) and 250 ms (flow), closed loops of 0.2 s
+    /// (pressure) and 0.3 s (flow): on plants whose
     /// transmitters and drives lag 20..110 ms (pressure) and 40..170 ms (flow) the loops held
     /// their targets better erring long than short (docs/control.md).
     pub const DEFAULT: Self = Self {
@@ -114,6 +121,8 @@ impl ControlSettings {
         law: ControlLaw::Model,
         pressure_lag_s: 0.08,
         flow_lag_s: 0.25,
+        pressure_closed_loop_s: crate::regulate::PRESSURE_CLOSED_LOOP_S,
+        flow_closed_loop_s: crate::regulate::FLOW_CLOSED_LOOP_S,
     };
 }
 
