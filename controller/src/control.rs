@@ -308,7 +308,7 @@ pub struct Commands {
     pub stop_writes: u16,
     /// The protections (holding registers 5..=7).
     pub protection: ProtectionConfig,
-    /// The pressure and flow loops' settings (holding registers 8..=16).
+    /// The pressure and flow loops' settings (holding registers 8..=18).
     pub control: ControlSettings,
 }
 
@@ -417,6 +417,9 @@ pub struct Controller<const NP: usize, const HP: usize, const NF: usize, const H
     out: Published,
     /// The pressure or flow loop (modes 3 and 4), from its first control period on.
     regulator: Option<Regulator>,
+    /// The plant's lag beyond the model each loop measured last (pressure, flow), s: kept
+    /// across the loops' restarts (a mode switch, a law change).
+    measured_lag_s: [f32; 2],
     /// The mode acted on at the last step (stop while held); `None` before the first.
     last_mode: Option<Mode>,
     /// The loops' law at the last step.
@@ -507,6 +510,7 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             virtual_bench: config.virtual_bench,
             out: Published::default(),
             regulator: None,
+            measured_lag_s: [0.0; 2],
             last_mode: None,
             last_law: ControlLaw::Model,
             manual_hold: None,
@@ -657,7 +661,8 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
                 o.control_error,
                 o.feedforward_pct,
                 o.integral_pct,
-            ) = (0.0, 0.0, 0.0, 0.0);
+                o.measured_lag_s,
+            ) = (0.0, 0.0, 0.0, 0.0, 0.0);
         }
         // The reference was not delivered while the link was down (0 % applied): the loop,
         // frozen meanwhile, goes on from the applied torque at its next control tick
@@ -787,11 +792,14 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
                 r.resume(measured, applied);
             }
         }
-        let r = self
-            .regulator
-            .get_or_insert_with(|| Regulator::new(controlled, measured, applied, v.speed_rpm));
-        r.step(self.whitebox.params(), v.load, s, setpoint, measured)
-            .torque_pct
+        let k = usize::from(controlled == Controlled::Flow);
+        let lag_s = self.measured_lag_s[k];
+        let r = self.regulator.get_or_insert_with(|| {
+            Regulator::new(controlled, measured, applied, v.speed_rpm).with_lag(lag_s)
+        });
+        let o = r.step(self.whitebox.params(), v.load, s, setpoint, measured);
+        self.measured_lag_s[k] = o.lag_s;
+        o.torque_pct
     }
 
     /// One observer step over the pressure period, then the alarms.
@@ -979,6 +987,7 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             o.control_error = l.error;
             o.feedforward_pct = l.feedforward_pct;
             o.integral_pct = l.integral_pct;
+            o.measured_lag_s = l.lag_s;
         }
         o.torque_pct = u;
         o.vfd_speed_rpm = readings.speed_rpm;

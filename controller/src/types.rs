@@ -71,7 +71,7 @@ impl ControlLaw {
     }
 }
 
-/// The pressure and flow loops' settings (SCADA holding registers 8..=16), in the core's
+/// The pressure and flow loops' settings (SCADA holding registers 8..=18), in the core's
 /// units.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -344,6 +344,9 @@ pub struct Published {
     pub feedforward_pct: f32,
     /// The loop's integral part, %.
     pub integral_pct: f32,
+    /// The plant's lag beyond the model, measured by the loop on its setpoint steps
+    /// (model-based law), s (0..=1; 0 in other modes and before a step has shown one).
+    pub measured_lag_s: f32,
 }
 
 #[cfg(test)]
@@ -388,7 +391,7 @@ mod tests {
         use core::mem::size_of;
         assert_eq!(
             size_of::<Published>(),
-            22 * size_of::<f32>() + 6 * size_of::<u16>()
+            23 * size_of::<f32>() + 6 * size_of::<u16>()
         );
     }
 }
