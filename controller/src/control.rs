@@ -566,6 +566,12 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
         self.regulator.as_ref()
     }
 
+    /// The plant's lag beyond the model the pressure and flow loops measured last, s
+    /// (`RegulatorOutput::lag_s`; 0 until a setpoint step of the model-based law showed one).
+    pub fn measured_lag_s(&self) -> [f32; 2] {
+        self.measured_lag_s
+    }
+
     /// What the SCADA registers hold now.
     pub fn published(&self) -> &Published {
         &self.out
@@ -661,8 +667,7 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
                 o.control_error,
                 o.feedforward_pct,
                 o.integral_pct,
-                o.measured_lag_s,
-            ) = (0.0, 0.0, 0.0, 0.0, 0.0);
+            ) = (0.0, 0.0, 0.0, 0.0);
         }
         // The reference was not delivered while the link was down (0 % applied): the loop,
         // frozen meanwhile, goes on from the applied torque at its next control tick
@@ -987,7 +992,6 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             o.control_error = l.error;
             o.feedforward_pct = l.feedforward_pct;
             o.integral_pct = l.integral_pct;
-            o.measured_lag_s = l.lag_s;
         }
         o.torque_pct = u;
         o.vfd_speed_rpm = readings.speed_rpm;

@@ -35,7 +35,6 @@
 //! | 27 | loop's control error (active setpoint − measured), as 26 | signed |
 //! | 28 | loop's feedforward part (the steady torque and its lead while the reference moves: may exceed 100 %) | 0.01 %, signed |
 //! | 29 | loop's integral part | 0.01 %, signed |
-//! | 30 | loop's measured lag: the plant's lag beyond the model, measured on the setpoint steps of the model-based law; the loop runs calmer above 100 ms (pressure) or 160 ms (flow) ([`crate::regulate`]) | ms |
 //!
 //! | holding register (FC 03, 06, 16) | meaning | range |
 //! |---|---|---|
@@ -82,7 +81,7 @@ use crate::types::{
 };
 
 /// Input registers.
-pub const INPUT_REGISTERS: usize = 31;
+pub const INPUT_REGISTERS: usize = 30;
 /// Holding registers (0..=18; 3 and 4 only with a virtual bench).
 pub const HOLDING_REGISTERS: usize = 19;
 /// Largest setpoint filter and transmitter time constant (holding registers 13, 15, 16), ms.
@@ -294,7 +293,7 @@ pub fn input_registers(p: &Published) -> [u16; INPUT_REGISTERS] {
     // the M4 than the same calls inlined.
     const U: u16 = u16::MAX;
     let loop_scale = loop_scale(p.status);
-    let scaled: [(u8, f32, f32, Option<u16>); 25] = [
+    let scaled: [(u8, f32, f32, Option<u16>); 24] = [
         (1, p.torque_pct, 100.0, Some(SETPOINT_MAX)),
         (2, p.pressure_mca, 1000.0, None),
         (3, p.flow_lps, 100.0, Some(U)),
@@ -317,7 +316,6 @@ pub fn input_registers(p: &Published) -> [u16; INPUT_REGISTERS] {
         (27, p.control_error, loop_scale, None),
         (28, p.feedforward_pct, 100.0, None),
         (29, p.integral_pct, 100.0, None),
-        (30, p.measured_lag_s, 1000.0, Some(U)),
         // The wide twins of 14 and 20: they do not count as saturated (the narrow ones say
         // so), a saturated twin still reads the wide value.
         (24, p.vfd_speed_rpm, 1.0, None),
@@ -355,7 +353,7 @@ fn loop_scale(status: u16) -> f32 {
     }
 }
 
-/// The published values back from input registers 0..=23 and 26..=30, as a SCADA client reads them:
+/// The published values back from input registers 0..=23 and 26..=29, as a SCADA client reads them:
 /// each within half its register's step of the value published, a saturated one at its
 /// range's end (status bit 8, not kept here, says so; the wide twins 24 and 25 are not read).
 pub fn published_from_registers(r: &[u16; INPUT_REGISTERS]) -> Published {
@@ -390,7 +388,6 @@ pub fn published_from_registers(r: &[u16; INPUT_REGISTERS]) -> Published {
         control_error: signed(27, loop_scale(r[0])),
         feedforward_pct: signed(28, 100.0),
         integral_pct: signed(29, 100.0),
-        measured_lag_s: unsigned(30, 1000.0),
     }
 }
 
@@ -1030,7 +1027,6 @@ mod tests {
             control_error: -0.0456,
             feedforward_pct: 41.237,
             integral_pct: -3.21,
-            measured_lag_s: 0.1234,
         };
         let r = input_registers(&p);
         assert_eq!(r[0] & 1 << 8, 0, "nothing saturated");
@@ -1059,7 +1055,6 @@ mod tests {
                 (x.control_error, 1000.0),
                 (x.feedforward_pct, 100.0),
                 (x.integral_pct, 100.0),
-                (x.measured_lag_s, 1000.0),
             ]
         };
         for (k, ((a, scale), (b, _))) in fields(&p).into_iter().zip(fields(&q)).enumerate() {

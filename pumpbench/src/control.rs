@@ -525,6 +525,9 @@ pub struct Trace {
     pub max_rate_pct_per_s: f64,
     /// The torque rate limit of holding register 12 (every mode switch and the loops), %/s.
     pub rate_limit_pct_per_s: f64,
+    /// The plant's lag beyond the model the pressure and flow loops measured by the run's
+    /// end, s (`Controller::measured_lag_s`; 0 if none was measured: the PI alone never does).
+    pub measured_lag_s: [f32; 2],
 }
 
 /// A `--set REGISTER=VALUE`: two decimal u16.
@@ -659,6 +662,7 @@ pub fn run(
         out_of_limits: 0,
         max_rate_pct_per_s: 0.0,
         rate_limit_pct_per_s: f64::from(lock.scada().commands().control.rate_pct_per_s),
+        measured_lag_s: [0.0; 2],
     };
     let mut last_torque: Option<f32> = None;
     let mut t = start_ms;
@@ -720,6 +724,7 @@ pub fn run(
             trace.max_rate_pct_per_s = trace.max_rate_pct_per_s.max(rate);
         }
         last_torque = Some(reply.torque_ref_pct);
+        trace.measured_lag_s = c.measured_lag_s();
         plant.apply(&reply)?;
         trace.samples.push(Sample {
             t_s: t as f64 * 1e-3,
@@ -1093,11 +1098,13 @@ pub fn report(
         let _ = writeln!(
             s,
             "{}: torque NaN steps {}, outside its limits {}, largest change into a period with \
-             the link up {:.1} %/s",
+             the link up {:.1} %/s; lag beyond the model measured: pressure {:.0} ms, flow {:.0} ms",
             trace.law.name(),
             trace.nan_steps,
             trace.out_of_limits,
-            trace.max_rate_pct_per_s
+            trace.max_rate_pct_per_s,
+            trace.measured_lag_s[0] * 1000.0,
+            trace.measured_lag_s[1] * 1000.0
         );
     }
     let n = runs.first().map_or(0, |r| r.1.len());

@@ -139,6 +139,7 @@ fn trace_of(samples: &[(f64, usize, u16, f64, f64)]) -> Trace {
         out_of_limits: 0,
         max_rate_pct_per_s: 0.0,
         rate_limit_pct_per_s: 200.0,
+        measured_lag_s: [0.0; 2],
     }
 }
 
