@@ -1098,7 +1098,7 @@ pub fn report(
         let _ = writeln!(
             s,
             "{}: torque NaN steps {}, outside its limits {}, largest change into a period with \
-             the link up {:.1} %/s; lag beyond the model measured: pressure {:.0} ms, flow {:.0} ms",
+             the link up {:.1} %/s; measured plant lag: pressure {:.0} ms, flow {:.0} ms",
             trace.law.name(),
             trace.nan_steps,
             trace.out_of_limits,
