@@ -556,6 +556,12 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
         )
     }
 
+    /// The models' sample periods, ms: (pressure, flow), the flow's a multiple of the
+    /// pressure's (the commissioning record's, [`crate::record::RecordRow::at_step`]).
+    pub fn sample_periods_ms(&self) -> (u32, u32) {
+        (self.pressure.period_ms, self.flow.period_ms)
+    }
+
     /// The next step is a loop's control tick ([`crate::regulate::CONTROL_PHASE_MS`]).
     fn control_due(&self) -> bool {
         self.regulating && self.t_ms % CONTROL_PERIOD_MS == CONTROL_PHASE_MS

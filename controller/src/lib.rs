@@ -12,6 +12,7 @@
 //! - [`control`]: the real-time core, stepped every 1 ms, that ties the inputs to the
 //!   white-box and NARMAX models, the observer and the alarms;
 //! - [`protect`]: the protections that trip the torque to 0 % (dry run, overspeed, no flow);
+//! - [`record`]: the commissioning record's rows, one per pressure sample;
 //! - [`link`]: the SCADA server and the VFD master that run apart from the core;
 //! - [`virtual_bench`]: the virtual bench that stands in for the real one (QEMU, host tests).
 #![cfg_attr(not(test), no_std)]
@@ -23,6 +24,7 @@ pub mod link;
 pub mod modbus;
 pub mod plant;
 pub mod protect;
+pub mod record;
 pub mod regulate;
 pub mod rtu;
 pub mod scada;

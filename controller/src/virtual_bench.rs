@@ -38,8 +38,11 @@ use model_core::{BenchError, BenchParams, BenchState, Scheme, Signals, WhiteBox}
 pub struct VirtualBenchConfig {
     /// Inertia factor (model × this).
     pub inertia_factor: f32,
-    /// Load torque factor on β1..β10 (friction and hydraulic torque).
+    /// Load torque factor on β1..β10 (friction and hydraulic torque): the load-torque curve
+    /// F_T (eq. 6) times this.
     pub load_torque_factor: f32,
+    /// Pump head factor on α1..α10: the head curve F_H (eq. 5) times this (1: the paper's).
+    pub head_factor: f32,
     /// Valve coefficient factor on k2.
     pub valve_factor: f32,
     /// Pressure transmitter time constant, s (≥ 0).
@@ -66,13 +69,14 @@ pub struct VirtualBenchConfig {
 pub const DRIVE_SPEED_LIMIT_BAND_RPM: f32 = 50.0;
 
 impl VirtualBenchConfig {
-    /// J +5 %, load torque +2 %, valve k2 +2 %; the bench's transmitters ([`PRESSURE_LOOP`]
+    /// J +5 %, load torque +2 %, the paper's head curve, valve k2 +2 %; the bench's transmitters ([`PRESSURE_LOOP`]
     /// 0..10 mca, [`FLOW_LOOP`] 0..30 l/s), lags 20 / 40 ms, noise 3 mm / 0.02 l/s; the drive's
     /// speed limit at 2 100 rpm (120 % of the motor's nominal 1 750).
     pub const fn default_offsets(seed: u64) -> Self {
         Self {
             inertia_factor: 1.05,
             load_torque_factor: 1.02,
+            head_factor: 1.0,
             valve_factor: 1.02,
             pressure_lag_s: 0.02,
             flow_lag_s: 0.04,
@@ -113,6 +117,9 @@ impl VirtualBench {
         p.inertia_kg_m2 *= config.inertia_factor;
         for b in &mut p.beta {
             *b *= config.load_torque_factor;
+        }
+        for a in &mut p.alpha {
+            *a *= config.head_factor;
         }
         p.valve_k2 *= config.valve_factor;
         if !(config.pressure_lag_s >= 0.0 && config.flow_lag_s >= 0.0) {

@@ -663,20 +663,55 @@ pub const MAX_JITTER: f64 = 0.1;
 
 /// Reads `t_s,torque_ref_pct` and, if present (or required), the column `y_column`; checks
 /// that times are strictly increasing and uniformly spaced (every step within 10 % of the
-/// median step).
+/// median step). A row whose `y_column` cell is empty is not a sample of it and is left out
+/// (a controller's record, `cargo xtask record`, has the flow on every other pressure row,
+/// and no reading where its transmitter was in fault); the rows left must be uniformly
+/// spaced, so a missing sample is refused as a gap.
 pub fn read_series(path: &Path, y_column: &str, required: bool) -> Result<Series, InputError> {
     let (input, lines, _) = read_torque(path)?;
-    let with_y = match read_columns(path, &["t_s", y_column]) {
-        Ok(d) => Some(d),
-        Err(e) if !required && e.message.starts_with("missing column") => None,
-        Err(e) => return Err(e),
+    let (names, optional): (&[&str], &[&str]) = if required {
+        (&[y_column], &[])
+    } else {
+        (&[], &[y_column])
     };
-    let y = with_y.as_ref().map(|d| d.rows().map(|r| r[1]).collect());
-    let mean_step = check_uniform(path, &input.t_s, &lines)?;
+    let mut cells: Vec<Option<f64>> = Vec::with_capacity(lines.len());
+    let columns = scan_csv(path, names, optional, |line, columns, record| {
+        if let Some(c) = columns[0] {
+            let text = record.get(c).unwrap_or("");
+            cells.push(if text.is_empty() {
+                None
+            } else {
+                Some(finite_cell(path, line, c, y_column, text)?)
+            });
+        }
+        Ok(())
+    })?;
+    let Some(y_col) = columns[0] else {
+        let mean_step = check_uniform(path, &input.t_s, &lines)?;
+        return Ok(Series {
+            t_s: input.t_s,
+            torque_ref_pct: input.torque_ref_pct,
+            y: None,
+            sample_period_s: mean_step,
+        });
+    };
+    let keep: Vec<usize> = (0..cells.len()).filter(|&k| cells[k].is_some()).collect();
+    if keep.is_empty() {
+        return Err(InputError {
+            path: path.to_path_buf(),
+            line: None,
+            column: Some((y_col + 1, y_column.to_string())),
+            message: format!("no row has a value of {y_column}: every cell is empty"),
+        });
+    }
+    let pick = |v: &[f64]| keep.iter().map(|&k| v[k]).collect::<Vec<f64>>();
+    let t_s = pick(&input.t_s);
+    let kept_lines: Vec<u64> = keep.iter().map(|&k| lines[k]).collect();
+    let mean_step = check_uniform(path, &t_s, &kept_lines)?;
     Ok(Series {
-        t_s: input.t_s,
-        torque_ref_pct: input.torque_ref_pct,
-        y,
+        t_s,
+        torque_ref_pct: pick(&input.torque_ref_pct),
+        y: Some(keep.iter().filter_map(|&k| cells[k]).collect()),
         sample_period_s: mean_step,
     })
 }
@@ -823,6 +858,56 @@ pub fn read_gappy_series(
         t_column,
         sample_period_s,
     })
+}
+
+#[cfg(test)]
+mod series_tests {
+    use super::*;
+    use std::io::Write;
+
+    fn read(text: &str, y: &str, required: bool) -> Result<Series, String> {
+        let mut f = tempfile::NamedTempFile::new().unwrap();
+        f.write_all(text.as_bytes()).unwrap();
+        read_series(f.path(), y, required)
+            .map_err(|e| e.to_string().replace(&f.path().display().to_string(), "F"))
+    }
+
+    /// A controller's record: the flow on every other row, the pressure on every row.
+    const RECORD: &str = "t_s,torque_ref_pct,pressure_mca,flow_lps\n0.000,10,1.5,5\n0.050,20,1.6,\n0.100,30,1.7,6\n0.150,40,1.8,\n0.200,50,1.9,7\n0.250,60,2.0,\n0.300,70,2.1,8\n";
+
+    #[test]
+    fn rows_with_an_empty_target_cell_are_not_samples() {
+        let q = read(RECORD, "flow_lps", true).unwrap();
+        assert_eq!(q.t_s, [0.0, 0.1, 0.2, 0.3]);
+        assert_eq!(q.torque_ref_pct, [10.0, 30.0, 50.0, 70.0]);
+        assert_eq!(q.y, Some(vec![5.0, 6.0, 7.0, 8.0]));
+        assert!((q.sample_period_s - 0.1).abs() < 1e-12);
+        let p = read(RECORD, "pressure_mca", true).unwrap();
+        assert_eq!(p.t_s.len(), 7);
+        assert!((p.sample_period_s - 0.05).abs() < 1e-12);
+        // An optional target column that is there is read the same way.
+        assert_eq!(read(RECORD, "flow_lps", false).unwrap(), q);
+        assert_eq!(read(RECORD, "speed_rpm", false).unwrap().y, None);
+    }
+
+    #[test]
+    fn a_lost_sample_is_a_gap_and_an_empty_column_is_refused() {
+        // The row at 0.100 s lost: a 0.2 s step among 0.1 s ones for the flow.
+        let lost = RECORD.replace("0.100,30,1.7,6\n", "");
+        let e = read(&lost, "flow_lps", true).unwrap_err();
+        assert!(e.contains("not uniformly sampled"), "{e}");
+        // The pressure in fault at 0.100 s (an empty cell) is a gap in the pressure.
+        let fault = RECORD.replace("0.100,30,1.7,6", "0.100,30,,6");
+        let e = read(&fault, "pressure_mca", true).unwrap_err();
+        assert!(e.contains("not uniformly sampled"), "{e}");
+        let none = "t_s,torque_ref_pct,flow_lps\n0,1,\n1,2,\n";
+        let e = read(none, "flow_lps", true).unwrap_err();
+        assert!(e.contains("no row has a value of flow_lps"), "{e}");
+        let bad = RECORD.replace(",1.8,", ",x,");
+        assert!(read(&bad, "pressure_mca", true)
+            .unwrap_err()
+            .contains("'x' is not a number"));
+    }
 }
 
 #[cfg(test)]

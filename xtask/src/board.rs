@@ -107,6 +107,17 @@ pub fn ensure_flip_link() -> Result {
 /// Builds `board`'s firmware image (profile `firmware`, defmt level `info`) at
 /// [`firmware_elf`].
 pub fn build_firmware(board: Board) -> Result {
+    build_with(board, &[])
+}
+
+/// The NUCLEO-F446RE image with feature `record` (the commissioning record over RTT), at
+/// [`firmware_elf`] in place of the ordinary one.
+pub fn build_nucleo_record() -> Result {
+    build_with(Board::Nucleo, &["--features", "record"])
+}
+
+/// [`build_firmware`] with cargo's `extra` arguments.
+fn build_with(board: Board, extra: &[&str]) -> Result {
     ensure_flip_link()?;
     run(
         &format!(
@@ -123,6 +134,7 @@ pub fn build_firmware(board: Board) -> Result {
                 "--target",
                 TARGET,
             ])
+            .args(extra)
             .args(board.config_args())
             .env("DEFMT_LOG", "info"),
     )

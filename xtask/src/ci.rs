@@ -1,11 +1,13 @@
 //! `cargo xtask test`: everything CI checks, in order: rustfmt, clippy `-D warnings` (host,
 //! both firmware boards and mcu-bench), the no_std crates built for the MCU, the host tests,
 //! docs, the bench and its budgets (both firmware images), the on-target checks, QEMU runs
-//! against the host replay, the plant protocol's check (host and QEMU bit for bit,
+//! against the host replay (one with the commissioning record's rows), the commissioning
+//! procedure end to end (`commission-check`), the plant protocol's check (host and QEMU bit for bit,
 //! `examples/plant.py` on both), the end-to-end test with `mbpoll`, and the flood.
 
 use crate::bench;
 use crate::board::{build_firmware, firmware_elf, Board};
+use crate::commission::commission_check;
 use crate::e2e;
 use crate::flood::{flood, FLOOD_S};
 use crate::plant_session::plant_check;
@@ -30,6 +32,20 @@ pub fn test() -> Result {
                 .args(["--profile", "firmware", "--", "-D", "warnings"]),
         )?;
     }
+    run(
+        "clippy (board nucleo-f446re, the commissioning record over RTT)",
+        cargo()
+            .args([
+                "clippy",
+                "-p",
+                Board::Nucleo.package(),
+                "--features",
+                "record",
+            ])
+            .args(["--target", TARGET])
+            .args(Board::Nucleo.config_args())
+            .args(["--profile", "firmware", "--", "-D", "warnings"]),
+    )?;
     run(
         "clippy (board qemu, plant mode)",
         cargo()
@@ -85,6 +101,8 @@ pub fn test() -> Result {
     eprintln!("==> on-target checks in QEMU (boards/qemu selftest)");
     print!("{}", selftest()?);
     replay(&elf)?;
+    eprintln!("==> commissioning end to end: record 600 s, identify, export, rebuild, residuals");
+    print!("{}", commission_check()?);
     plant_check()?;
     eprintln!("==> end to end: QEMU in real time, SCADA on a pty, mbpoll as the client");
     print!("{}", e2e::run(&elf)?);

@@ -3,6 +3,8 @@
 //! - `qemu`: build the firmware for QEMU and run it on the virtual bench: a deterministic run
 //!   (`-icount`), or with `--scada-pty` in real time until stopped, the SCADA slave on a
 //!   pseudo-terminal.
+//! - `record`: the commissioning record ([`record`](mod@record)): the controller in the
+//!   excitation mode, a row per pressure sample, to the CSV `pumpbench identify` reads.
 //! - `bench`: the kernels' instructions per call on the MCU (mcu-bench under QEMU), the
 //!   images' and model-core's parts' size from their ELF, checked against
 //!   `bench/baseline.json` and the size budgets (see [`bench`](mod@bench)).
@@ -33,6 +35,7 @@ mod bench;
 mod board;
 mod bridge;
 mod ci;
+mod commission;
 mod defmt_log;
 mod e2e;
 mod elf;
@@ -44,6 +47,7 @@ mod plant_session;
 mod protection_session;
 mod qemu;
 mod qemu_task;
+mod record;
 mod replay;
 mod util;
 
@@ -54,7 +58,7 @@ use util::Result;
 
 /// `cargo xtask`'s usage (with no task or an unknown one).
 fn usage() -> String {
-    format!("usage: cargo xtask <qemu|bench|test|replay|e2e|flood|plant-check|plant-stdio>\n  qemu   build the firmware and run it in QEMU on the virtual bench\n  bench  the kernels' instructions per call on the MCU, image sizes, checked against bench/baseline.json and the budgets\n  test   fmt, clippy, tests, the bench and its budgets, QEMU runs against the host, mbpoll end to end\n  replay only the on-target checks and the QEMU runs against the host replay\n  e2e    only the mbpoll end-to-end test\n  flood  only the margins under a SCADA flood with the VFD link busy\n  plant-check  the plant protocol: a scenario plant against the host and the QEMU board, bit for bit; examples/plant.py against both\n  plant-stdio  the controller's side of the plant protocol on stdin/stdout (e.g. python3 examples/plant.py -- cargo xtask plant-stdio)\n{}\n{}", qemu_task::QEMU_USAGE, bench::BENCH_USAGE)
+    format!("usage: cargo xtask <qemu|record|commission-check|bench|test|replay|e2e|flood|plant-check|plant-stdio>\n  qemu   build the firmware and run it in QEMU on the virtual bench\n  record the commissioning record: the controller's samples in the excitation mode to a CSV for pumpbench identify\n  commission-check  the commissioning procedure end to end: record 600 s, identify, export, rebuild; the residuals must drop\n  bench  the kernels' instructions per call on the MCU, image sizes, checked against bench/baseline.json and the budgets\n  test   fmt, clippy, tests, the bench and its budgets, QEMU runs against the host, mbpoll end to end\n  replay only the on-target checks and the QEMU runs against the host replay\n  e2e    only the mbpoll end-to-end test\n  flood  only the margins under a SCADA flood with the VFD link busy\n  plant-check  the plant protocol: a scenario plant against the host and the QEMU board, bit for bit; examples/plant.py against both\n  plant-stdio  the controller's side of the plant protocol on stdin/stdout (e.g. python3 examples/plant.py -- cargo xtask plant-stdio)\n{}\n{}", qemu_task::QEMU_USAGE, bench::BENCH_USAGE)
 }
 
 /// Runs the task `args[0]` with its arguments.
@@ -64,6 +68,8 @@ fn dispatch(args: &[String]) -> Result {
         Some("test") => ci::test(),
         Some("plant-stdio") => plant_session::plant_stdio(),
         Some("plant-check") => plant_session::plant_check(),
+        Some("record") => record::record(&args[1..]),
+        Some("commission-check") => commission::commission_check().map(|r| print!("{r}")),
         Some("bench") => bench::run_bench(&bench::Options::parse(&args[1..])?),
         Some("flood") => build_firmware(Board::Qemu).and_then(|()| {
             print!("{}", flood(&firmware_elf(Board::Qemu), FLOOD_S, false)?);
@@ -109,6 +115,8 @@ mod tests {
         let u = usage();
         for task in [
             "qemu",
+            "record",
+            "commission-check",
             "bench",
             "test",
             "replay",

@@ -7,6 +7,7 @@ use crate::qemu::{qemu_log, qemu_log_status};
 use crate::util::{field, num, target_dir, Result, TARGET};
 use std::path::Path;
 
+use controller::record::RecordRow;
 use pump_models::{flow as flow_model, pressure as pressure_model};
 
 /// The on-target checks (`boards/qemu`'s `selftest`) in QEMU: their digests must equal the
@@ -74,8 +75,9 @@ fn check_fault_run(ok: bool, fault: &str) -> Result {
 /// The firmware replayed on the host: the same `controller` code (the core, its links and the
 /// virtual bench with its in-process drive, run by `VirtualBoard` in the firmware's task
 /// order), with the options the firmware announces in its header line.
-/// Returns the log lines it makes for the ticks `0..=run_ms`.
-fn host_replay(header: &str, run_ms: u32) -> Result<Vec<String>> {
+/// Returns the log lines it makes for the ticks `0..=run_ms`, and the record rows if the
+/// header says `record=true`.
+pub fn host_replay(header: &str, run_ms: u32) -> Result<(Vec<String>, Vec<String>)> {
     use controller::control::{Config, NarmaxModel};
     use controller::types::{Arithmetic, Mode};
     use controller::virtual_bench::{VirtualBenchConfig, VirtualBoard};
@@ -111,15 +113,47 @@ fn host_replay(header: &str, run_ms: u32) -> Result<Vec<String>> {
         ms(flow_model::SAMPLE_PERIOD_S)?,
     )
     .map_err(e)?;
-    let mut board =
-        VirtualBoard::new(&config, p, q, VirtualBenchConfig::default_offsets(seed)).map_err(e)?;
-    let mut lines = vec![];
+    // The board's curves, per mille (`head=`, `torque=`), to f32 as the firmware does.
+    let per_mille = |key| num::<u32>(header, key).map(|n| n as f32 / 1000.0);
+    let bench = VirtualBenchConfig {
+        head_factor: per_mille("head")?,
+        load_torque_factor: per_mille("torque")?,
+        ..VirtualBenchConfig::default_offsets(seed)
+    };
+    let record = field(header, "record")? == "true";
+    let mut board = VirtualBoard::new(&config, p, q, bench).map_err(e)?;
+    let (pp, fp) = board.controller.sample_periods_ms();
+    let (mut lines, mut rows) = (vec![], vec![]);
     for _ in 0..=run_ms {
-        if let Some(log) = board.tick().map_err(|e| e.to_string())?.log {
+        let out = board.tick().map_err(|e| e.to_string())?;
+        if let Some(log) = out.log {
             lines.push(log_text(&log));
         }
+        if let Some(row) = RecordRow::at_step(out.t_ms, &out.published, pp, fp).filter(|_| record) {
+            rows.push(record_text(&row));
+        }
     }
-    Ok(lines)
+    Ok((lines, rows))
+}
+
+/// A record row as the firmware's defmt line decodes (`rec seq=… … status=…`), f32 values
+/// printed by `ryu`.
+pub fn record_text(r: &RecordRow) -> String {
+    let f = |x: f32| ryu::Buffer::new().format(x).to_string();
+    format!(
+        "rec seq={} t_ms={} u_pct={} p_mca={} q_lps={} q_new={} vfd_rpm={} ob_k2={} ob_q={} alarms={} status={}",
+        r.seq,
+        r.t_ms,
+        f(r.torque_pct),
+        f(r.pressure_mca),
+        f(r.flow_lps),
+        r.flow_sampled,
+        f(r.vfd_speed_rpm),
+        f(r.observer_k2),
+        f(r.observer_flow_lps),
+        r.alarms,
+        r.status
+    )
 }
 
 /// A log line as the firmware's defmt line decodes: the same names, f32 values printed by
@@ -142,10 +176,24 @@ fn log_text(log: &controller::control::LogLine) -> String {
 }
 
 /// Checks the firmware's log lines against the host replay, text and f32 bits.
-fn check_golden(output: &str, run_ms: u32) -> Result<usize> {
+/// With the record on, its rows too; returns how many log lines and rows were compared.
+fn check_golden(output: &str, run_ms: u32) -> Result<(usize, usize)> {
     let header = finished_run_header(output)?;
-    let host = host_replay(header, run_ms)?;
-    compare_lines(output, &host)
+    let (host, rows) = host_replay(header, run_ms)?;
+    let target_rows: Vec<&str> = output.lines().filter(|l| l.starts_with("rec ")).collect();
+    if target_rows.len() != rows.len() {
+        return Err(format!(
+            "the firmware sent {} record rows, the host replay made {}",
+            target_rows.len(),
+            rows.len()
+        ));
+    }
+    for (t, h) in target_rows.iter().zip(&rows) {
+        if t != h {
+            return Err(format!("firmware: {t}\nhost:     {h}"));
+        }
+    }
+    Ok((compare_lines(output, &host)?, rows.len()))
 }
 
 /// The header line (`firmware: …`) of a run's log that ran to its end (`done`).
@@ -183,16 +231,23 @@ fn compare_lines(output: &str, host: &[String]) -> Result<usize> {
 pub fn replay(elf: &Path) -> Result {
     eprintln!("==> QEMU runs against the host replay (netduinoplus2, -icount shift=0,sleep=off)");
     const RUN_MS: u32 = 20_000;
-    for narmax in ["f32", "q15"] {
-        let args = [
+    // The Q15 run on a bench with other curves, the commissioning record on.
+    for (narmax, extra) in [("f32", ""), ("q15", " head=950 torque=1070 record")] {
+        let mut args = vec![
             "mode=2".to_string(),
             format!("narmax={narmax}"),
             format!("run_ms={}", RUN_MS + 1),
         ];
+        args.extend(extra.split_whitespace().map(str::to_string));
         let out = qemu_log(elf, &args)?;
-        let n = check_golden(&out, RUN_MS)?;
+        let (n, rows) = check_golden(&out, RUN_MS)?;
+        let rows = if rows > 0 {
+            format!(" and {rows} record rows")
+        } else {
+            String::new()
+        };
         println!(
-            "QEMU run, NARMAX {narmax}: {n} log lines (white-box, measured, NARMAX, residuals) equal the host replay, bit for bit"
+            "QEMU run, NARMAX {narmax}{extra}: {n} log lines (white-box, measured, NARMAX, residuals){rows} equal the host replay, bit for bit"
         );
     }
     Ok(())
@@ -203,20 +258,29 @@ mod tests {
     use super::*;
 
     const HEADER: &str =
-        "firmware: virtual bench, SCADA unit 1 on USART1, VFD virtual, mode=2 setpoint=0 seed=1 narmax=f32";
+        "firmware: virtual bench, SCADA unit 1 on USART1, VFD virtual, mode=2 setpoint=0 seed=1 narmax=f32 head=1000 torque=1020 record=false";
 
     /// A log as the firmware writes it: the header, the lines, margins between, `done`.
     fn log(header: &str, lines: &[String]) -> String {
+        log_with_rows(header, lines, &[])
+    }
+
+    /// [`log`] with record rows after the lines.
+    fn log_with_rows(header: &str, lines: &[String], rows: &[String]) -> String {
         let mut s = format!("{header}\n");
         for l in lines {
             s.push_str(&format!("{l}\nmargin: steps=1 control_max=1\n"));
+        }
+        for r in rows {
+            s.push_str(&format!("{r}\n"));
         }
         s + "done: steps=3001 control_max=1 rx_wait_bound=1 lost=0\n"
     }
 
     #[test]
     fn host_replay_follows_the_header() {
-        let f32 = host_replay(HEADER, 3000).unwrap();
+        let (f32, rows) = host_replay(HEADER, 3000).unwrap();
+        assert!(rows.is_empty());
         // One line a second, ticks 0..=3000.
         assert_eq!(f32.len(), 4);
         for (i, l) in f32.iter().enumerate() {
@@ -227,34 +291,71 @@ mod tests {
             assert!(l.contains(" alarms=") && l.contains(" status="), "{l}");
         }
         // The same run again: the same text; another arithmetic, seed or mode: not.
-        assert_eq!(host_replay(HEADER, 3000).unwrap(), f32);
-        let q15 = host_replay(&HEADER.replace("narmax=f32", "narmax=q15"), 3000).unwrap();
+        assert_eq!(host_replay(HEADER, 3000).unwrap().0, f32);
+        let q15 = host_replay(&HEADER.replace("narmax=f32", "narmax=q15"), 3000)
+            .unwrap()
+            .0;
         assert!(q15[1].starts_with("t_s=1 mode=profile narmax=q15 "));
         assert_ne!(
             q15[1].split_once(" u_pct").unwrap().1,
             f32[1].split_once(" u_pct").unwrap().1
         );
-        let seed = host_replay(&HEADER.replace("seed=1", "seed=2"), 3000).unwrap();
+        let seed = host_replay(&HEADER.replace("seed=1", "seed=2"), 3000)
+            .unwrap()
+            .0;
         assert_ne!(seed[1], f32[1]);
+        // Other curves: other values.
+        for curves in ["head=950 torque=1020", "head=1000 torque=1070"] {
+            let other = host_replay(&HEADER.replace("head=1000 torque=1020", curves), 3000);
+            assert_ne!(other.unwrap().0[2], f32[2], "{curves}");
+        }
         let manual = host_replay(
             &HEADER.replace("mode=2 setpoint=0", "mode=1 setpoint=6000"),
             3000,
         )
-        .unwrap();
+        .unwrap()
+        .0;
         assert!(manual[1].starts_with("t_s=1 mode=manual narmax=f32 u_pct=60.0 "));
         // A header without its options is refused.
         assert!(host_replay("firmware: mode=2 seed=1 narmax=f32", 10).is_err());
         assert!(host_replay(&HEADER.replace("narmax=f32", "narmax=f16"), 10).is_err());
         assert!(host_replay(&HEADER.replace("seed=1", "seed=x"), 10).is_err());
+        assert!(host_replay(&HEADER.replace(" head=1000", ""), 10).is_err());
+    }
+
+    #[test]
+    fn record_rows_of_the_replay() {
+        let header = HEADER.replace("record=false", "record=true");
+        let (lines, rows) = host_replay(&header, 3000).unwrap();
+        // The record does not change the run.
+        assert_eq!(lines, host_replay(HEADER, 3000).unwrap().0);
+        // A row per 50 ms pressure sample, ticks 0..=3000, the flow on every other one.
+        assert_eq!(rows.len(), 61);
+        for (k, r) in rows.iter().enumerate() {
+            assert!(
+                r.starts_with(&format!("rec seq={k} t_ms={} u_pct=", 50 * k)),
+                "{r}"
+            );
+            assert!(r.contains(&format!(" q_new={} ", k % 2 == 0)), "{r}");
+        }
+        let good = log_with_rows(&header, &lines, &rows);
+        assert_eq!(check_golden(&good, 3000), Ok((4, 61)));
+        // A row lost, or one value off: refused.
+        assert!(check_golden(&log_with_rows(&header, &lines, &rows[1..]), 3000).is_err());
+        let mut off = rows.clone();
+        off[7] = off[7].replace(" alarms=0 ", " alarms=1 ");
+        assert_ne!(off, rows);
+        let e = check_golden(&log_with_rows(&header, &lines, &off), 3000).unwrap_err();
+        assert!(e.starts_with("firmware: rec seq=7 "), "{e}");
     }
 
     #[test]
     fn golden_comparison() {
-        let host = host_replay(HEADER, 3000).unwrap();
+        let host = host_replay(HEADER, 3000).unwrap().0;
         let good = log(HEADER, &host);
         assert_eq!(finished_run_header(&good), Ok(HEADER));
         assert_eq!(compare_lines(&good, &host), Ok(4));
-        assert_eq!(check_golden(&good, 3000), Ok(4));
+        assert_eq!(check_golden(&good, 3000), Ok((4, 0)));
         // One value one digit off: the text differs, and the error shows both lines.
         let mut off = host.clone();
         let last = off[2].pop().unwrap();

@@ -15,14 +15,15 @@ use crate::port::{serve_scada, PortTask};
 use crate::{record_max, Margin};
 use controller::control::{Commands, LogLine, Outputs, VfdStatus};
 use controller::link::{ScadaLink, VfdLink, VfdPort};
+use controller::record::RecordRow;
 use controller::types::Published;
 use core::sync::atomic::Ordering;
 use rtic_core::Mutex;
 use rtic_sync::channel::{Receiver, Sender};
 use rtic_sync::signal::{SignalReader, SignalWriter};
 
-/// Messages the log channel holds (4 s of once-a-second lines).
-pub const LOG_CAP: usize = 4;
+/// Messages the log channel holds (8 s of once-a-second lines; 0.4 s of record rows).
+pub const LOG_CAP: usize = 8;
 
 /// What the control task asks of the VFD master after a step.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -38,6 +39,8 @@ pub struct VfdRequest {
 pub enum LogMsg {
     /// The once-a-second line (the margins follow it).
     Line(LogLine),
+    /// A commissioning record row ([`StepLinks::record`]).
+    Record(RecordRow),
     /// An error, logged as it is.
     Error(&'static str),
     /// The end of the run: the totals are logged and [`log`] returns whether it passed.
@@ -98,6 +101,8 @@ pub struct StepLinks {
     vfd: VfdSend,
     scada_wake: ScadaWake,
     log: LogSend,
+    /// The models' sample periods (pressure, flow), ms, while the record is on.
+    record: Option<(u32, u32)>,
 }
 
 impl StepLinks {
@@ -107,7 +112,15 @@ impl StepLinks {
             vfd,
             scada_wake,
             log,
+            record: None,
         }
+    }
+
+    /// Turns the commissioning record on: after each step that sampled the pressure, its
+    /// [`RecordRow`] to the log task (`periods`: the models' sample periods, ms,
+    /// [`controller::control::Controller::sample_periods_ms`]).
+    pub fn record(&mut self, periods: (u32, u32)) {
+        self.record = Some(periods);
     }
 }
 
@@ -117,7 +130,8 @@ impl StepLinks {
     /// several late steps run at once, the master's next pass takes the last one's request
     /// and time), the SCADA server woken (its answers read the values just published), the
     /// step counted in [`Margin::steps`], and the once-a-second line queued for the log task
-    /// (dropped with a warning if the log task is [`LOG_CAP`] lines behind).
+    /// (dropped with a warning if the log task is [`LOG_CAP`] lines behind); with the record
+    /// on, the step's row (dropped likewise: its number shows the gap).
     #[inline]
     pub fn after_step(&mut self, out: &Outputs, margin: &Margin, publish: impl FnOnce(&Published)) {
         publish(&out.published);
@@ -131,6 +145,14 @@ impl StepLinks {
             if self.log.try_send(LogMsg::Line(line)).is_err() {
                 #[cfg(feature = "defmt")]
                 defmt::warn!("log line dropped (log task behind)");
+            }
+        }
+        if let Some((p, q)) = self.record {
+            if let Some(row) = RecordRow::at_step(out.t_ms, &out.published, p, q) {
+                if self.log.try_send(LogMsg::Record(row)).is_err() {
+                    #[cfg(feature = "defmt")]
+                    defmt::warn!("record row {=u32} dropped (log task behind)", row.seq);
+                }
             }
         }
     }
@@ -205,6 +227,7 @@ pub async fn log_task(wait: &mut LogWait, margin: &Margin, clock: impl Fn() -> u
 ///   interrupts while it copies a frame, [`Margin::masked_max`]), then the margins as
 ///   `margin: steps=… control_max=… usart_max=… masked_max=… rx_wait_bound=… bytes=… lost=…`
 ///   (`cargo xtask flood` reads it);
+/// - a record row: written, timed as a line's write;
 /// - an error: written as it is;
 /// - the end of the run: `done: steps=… control_max=… rx_wait_bound=… lost=…`, and
 ///   `Some(passed)`: not failed and no received byte lost (the board then exits).
@@ -235,6 +258,13 @@ pub fn log(msg: LogMsg, margin: &Margin, clock: impl Fn() -> u32) -> Option<bool
                     m.bytes_lost
                 );
             }
+            None
+        }
+        LogMsg::Record(_row) => {
+            let t0 = clock();
+            #[cfg(feature = "defmt")]
+            defmt::info!("{}", _row);
+            record_max(&margin.masked_max, clock().wrapping_sub(t0));
             None
         }
         LogMsg::Error(_what) => {

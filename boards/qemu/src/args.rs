@@ -3,8 +3,11 @@
 //! `key=value`: `mode=0|1|2` (start-up mode, default 0 stop), `setpoint=0..10000` (0.01 %),
 //! `seed=N` (profile and bench seed, 0..=4294967295, default 1), `narmax=f32|q15` (NARMAX
 //! arithmetic), `run_ms=N` (exit 0 after N ms; default: run until QEMU is stopped),
-//! `vfd=uart` (the VFD master on USART2 instead of the in-process drive). A bad argument is
-//! reported and the firmware exits with status 1.
+//! `vfd=uart` (the VFD master on USART2 instead of the in-process drive), `record` (the
+//! commissioning record: a row per pressure sample in the log, `controller::record`),
+//! `head=800..1200` and `torque=800..1200` (the virtual bench's pump-head and load-torque
+//! curves, per mille of the paper's; defaults 1000 and 1020). A bad argument is reported and
+//! the firmware exits with status 1.
 
 use controller::types::{Arithmetic, Mode};
 
@@ -23,7 +26,16 @@ pub struct Args {
     pub vfd_uart: bool,
     /// The NARMAX arithmetic (`narmax=f32|q15`).
     pub arithmetic: Arithmetic,
+    /// The commissioning record on (`record`).
+    pub record: bool,
+    /// The virtual bench's pump-head curve, per mille of the paper's (`head=800..1200`).
+    pub head_pml: u32,
+    /// The virtual bench's load-torque curve, per mille of the paper's (`torque=800..1200`).
+    pub torque_pml: u32,
 }
+
+/// The range of `head=` and `torque=`, per mille.
+const CURVE_PML: core::ops::RangeInclusive<u32> = 800..=1200;
 
 /// A decimal `u32`, digits only.
 fn number(digits: &[u8]) -> Option<u32> {
@@ -47,6 +59,9 @@ pub fn parse_args(line: &[u8]) -> Result<Args, &[u8]> {
         run_ms: None,
         vfd_uart: false,
         arithmetic: Arithmetic::F32,
+        record: false,
+        head_pml: 1000,
+        torque_pml: 1020,
     };
     // The first word is the program name; words are separated by ASCII spaces.
     for word in line.split(|&b| b == b' ').filter(|w| !w.is_empty()).skip(1) {
@@ -68,6 +83,18 @@ pub fn parse_args(line: &[u8]) -> Result<Args, &[u8]> {
             b"seed" => a.seed = n()?,
             b"run_ms" => a.run_ms = Some(n()?),
             b"vfd" if value == b"uart" => a.vfd_uart = true,
+            b"record" if value.is_empty() => a.record = true,
+            b"head" | b"torque" => {
+                let pml = n()?;
+                if !CURVE_PML.contains(&pml) {
+                    return Err(word);
+                }
+                *if key == b"head" {
+                    &mut a.head_pml
+                } else {
+                    &mut a.torque_pml
+                } = pml;
+            }
             b"narmax" => {
                 a.arithmetic = match value {
                     b"f32" => Arithmetic::F32,

@@ -136,8 +136,12 @@ mod app {
         let core = board_common::build_controller(&config).unwrap_or_else(|_| fail("controller"));
         let scada = ScadaLink::new(&config).unwrap_or_else(|_| fail("SCADA"));
         let vfd = VfdLink::new(config.vfd).unwrap_or_else(|_| fail("VFD link"));
-        let bench = VirtualBench::new(VirtualBenchConfig::default_offsets(u64::from(a.seed)))
-            .unwrap_or_else(|_| fail("virtual bench"));
+        let bench = VirtualBench::new(VirtualBenchConfig {
+            head_factor: a.head_pml as f32 / 1000.0,
+            load_torque_factor: a.torque_pml as f32 / 1000.0,
+            ..VirtualBenchConfig::default_offsets(u64::from(a.seed))
+        })
+        .unwrap_or_else(|_| fail("virtual bench"));
         let io = VirtualIo::new(bench, config.vfd).unwrap_or_else(|| fail("VFD map"));
 
         // The time bases (see the module docs), the clock, the two USARTs.
@@ -162,14 +166,20 @@ mod app {
 
         board_common::start_systick(cx.core.SYST, QEMU_SYSTICK_HZ / WAKE_HZ - 1);
 
-        let links = board_common::tasks::links();
+        let mut links = board_common::tasks::links();
+        if a.record {
+            links.step.record(core.sample_periods_ms());
+        }
         defmt::info!(
-            "firmware: virtual bench, SCADA unit 1 on USART1, VFD {=str}, mode={=u16} setpoint={=u16} seed={=u32} narmax={=str}{=str}",
+            "firmware: virtual bench, SCADA unit 1 on USART1, VFD {=str}, mode={=u16} setpoint={=u16} seed={=u32} narmax={=str} head={=u32} torque={=u32} record={=bool}{=str}",
             if a.vfd_uart { "on USART2" } else { "virtual" },
             controller::scada::mode_register(a.mode),
             a.setpoint,
             a.seed,
             a.arithmetic.name(),
+            a.head_pml,
+            a.torque_pml,
+            a.record,
             if a.run_ms.is_some() { "" } else { ", runs until stopped" }
         );
         let _ = scada::spawn();
