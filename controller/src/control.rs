@@ -408,6 +408,8 @@ pub struct Controller<const NP: usize, const HP: usize, const NF: usize, const H
     vfd_reads_seen: u32,
     /// [`Commands::stop_writes`] last acknowledged.
     stop_writes_seen: u16,
+    /// The overspeed limit last handed to the monitor, rpm (0: none yet).
+    overspeed_set_rpm: u16,
     protection: Protection,
     /// The torque is held at 0 % this step (tripped, or not yet restarted).
     hold: bool,
@@ -504,6 +506,7 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             torque_ticks: 0,
             vfd_reads_seen: 0,
             stop_writes_seen: 0,
+            overspeed_set_rpm: 0,
             protection: Protection::new(),
             hold: false,
             protect_reads: (0, 0),
@@ -620,8 +623,13 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             Some(r) if age_ms <= DRIVE_READING_FRESH_MS => r.speed_rpm,
             _ => self.out.observer_speed_rpm,
         };
-        self.monitor
-            .set_overspeed_limit_rpm(f32::from(c.protection.overspeed_rpm));
+        // The limit to the monitor when SCADA changes it (a conversion and a check saved on
+        // the other steps).
+        if c.protection.overspeed_rpm != self.overspeed_set_rpm {
+            self.overspeed_set_rpm = c.protection.overspeed_rpm;
+            self.monitor
+                .set_overspeed_limit_rpm(f32::from(c.protection.overspeed_rpm));
+        }
         self.monitor.check_speed(dt, speed);
         let ack = c.stop_writes != self.stop_writes_seen;
         if ack {

@@ -115,11 +115,9 @@ impl VirtualBench {
     pub fn new(config: VirtualBenchConfig) -> Result<Self, BenchError> {
         let mut p = BenchParams::<f32>::paper();
         p.inertia_kg_m2 *= config.inertia_factor;
-        for b in &mut p.beta {
-            *b *= config.load_torque_factor;
-        }
-        for a in &mut p.alpha {
+        for (a, b) in p.alpha.iter_mut().zip(&mut p.beta) {
             *a *= config.head_factor;
+            *b *= config.load_torque_factor;
         }
         p.valve_k2 *= config.valve_factor;
         if !(config.pressure_lag_s >= 0.0 && config.flow_lag_s >= 0.0) {
