@@ -8,19 +8,23 @@ use crate::qemu::{qemu_command, qemu_log, start_pty};
 use crate::util::Result;
 
 /// `cargo xtask qemu`'s usage.
-pub const QEMU_USAGE: &str = "usage: cargo xtask qemu [--scada-pty] [--vfd PTY | --plant PTY|pty] [--seconds N] [--mode 0|1|2] [--setpoint 0..10000] [--seed N] [--narmax f32|q15]
+pub const QEMU_USAGE: &str = "usage: cargo xtask qemu [--scada-pty] [--vfd PTY | --plant PTY|pty] [--seconds N] [--mode 0|1|2] [--setpoint 0..10000] [--seed N] [--narmax f32|q15] [--head PML] [--torque PML]
   (no --scada-pty)  run the virtual bench for --seconds (default 20) of loop time, mode 2 (the
                     paper's excitation) unless --mode says otherwise, deterministic and faster
                     than real time (-icount); the kernels' cost is `cargo xtask bench`
   --scada-pty       real time, until stopped (Ctrl-C): the SCADA slave (unit 1, 19200 8N1 RTU)
                     on a pseudo-terminal; QEMU prints its path. Starts stopped (mode 0).
+  --head, --torque  the virtual bench's pump-head and load-torque curves, per mille of the
+                    paper's (800..1200; defaults 1000 and 1020), e.g. the bench a record was
+                    made on (cargo xtask record)
   --vfd PTY         the VFD master on USART2 to that serial device (e.g. pumpbench vfd-sim's)
   --plant PTY|pty   plant mode (the pump-qemu-plant image): no virtual bench and no VFD link,
                     an external plant closes the loop in lockstep over USART2, speaking the
                     plant protocol (controller::plant), on that serial device, or with `pty`
                     on a pseudo-terminal QEMU makes and names (python3 examples/plant.py
                     /dev/pts/N); ends when the plant sends Q. Takes no --mode, --setpoint,
-                    --seed, --narmax, --seconds: the plant writes the registers";
+                    --seed, --narmax, --head, --torque, --seconds: the plant writes the
+                    registers";
 
 /// Options of `cargo xtask qemu`.
 #[derive(Debug, PartialEq)]
@@ -94,12 +98,16 @@ fn parse_qemu_options(args: &[String]) -> Result<QemuOptions> {
             "--narmax" => o
                 .firmware_args
                 .push(format!("narmax={}", value("--narmax")?)),
+            "--head" => o.firmware_args.push(format!("head={}", value("--head")?)),
+            "--torque" => o
+                .firmware_args
+                .push(format!("torque={}", value("--torque")?)),
             other => return Err(format!("unknown option '{other}'\n{QEMU_USAGE}")),
         }
     }
     if o.plant.is_some() && (o.vfd.is_some() || !o.firmware_args.is_empty()) {
         return Err(format!(
-            "--plant takes no --vfd, --mode, --setpoint, --seed or --narmax\n{QEMU_USAGE}"
+            "--plant takes no --vfd, --mode, --setpoint, --seed, --narmax, --head or --torque\n{QEMU_USAGE}"
         ));
     }
     Ok(o)
@@ -221,6 +229,11 @@ mod tests {
             o.firmware_args(),
             ["seed=7", "narmax=f32", "mode=2", "run_ms=20001"]
         );
+        let o = parse_qemu_options(&args("--head 950 --torque 1050")).unwrap();
+        assert_eq!(
+            o.firmware_args(),
+            ["head=950", "torque=1050", "mode=2", "run_ms=20001"]
+        );
     }
 
     #[test]
@@ -246,6 +259,7 @@ mod tests {
             "--plant pty --mode 3",
             "--plant pty --vfd /dev/pts/1",
             "--seed 2 --plant x",
+            "--plant pty --head 950",
         ] {
             let e = parse_qemu_options(&args(s)).unwrap_err();
             assert!(e.starts_with("--plant takes no"), "{s}: {e}");
