@@ -204,10 +204,7 @@ fn plant_mode(plant: &str, scada_pty: bool) -> Result {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn args(s: &str) -> Vec<String> {
-        s.split_whitespace().map(str::to_string).collect()
-    }
+    use crate::util::args;
 
     #[test]
     fn deterministic_runs() {

@@ -377,10 +377,7 @@ fn record_nucleo(o: &RecordOptions) -> Result<String> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn args(s: &str) -> Vec<String> {
-        s.split_whitespace().map(str::to_string).collect()
-    }
+    use crate::util::args;
 
     #[test]
     fn options() {

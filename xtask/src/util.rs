@@ -63,6 +63,12 @@ pub fn num<T: std::str::FromStr>(line: &str, key: &str) -> Result<T> {
         .map_err(|_| format!("bad '{key}' in line: {line}"))
 }
 
+/// A command line's words (tests: `args("--seconds 5 --output r")`).
+#[cfg(test)]
+pub fn args(s: &str) -> Vec<String> {
+    s.split_whitespace().map(str::to_string).collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
