@@ -23,6 +23,7 @@
 
 use crate::scalar::Real;
 
+pub mod adapt;
 pub mod mcu;
 
 /// Largest input delay `nk` supported.

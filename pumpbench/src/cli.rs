@@ -245,6 +245,26 @@ pub struct SimulateArgs {
     /// complete: a failed run leaves nothing behind.
     #[arg(long)]
     pub output: Option<PathBuf>,
+    /// NARMAX only: how the free run follows the plant. `off`: the identified model alone.
+    /// `output-map`: the model runs free, its weights untouched, and an affine map of its
+    /// output is fitted on line to the input's measurements (the target column), as the
+    /// firmware does (model_core::narmax::adapt); each row's prediction is made before its
+    /// measurement is taken. Readings at or beyond the controller's transmitter spans
+    /// (0..10 mca, 0..30 l/s: clamped values) are not taken.
+    #[arg(long, value_enum, default_value = "off")]
+    pub adapt: Adapt,
+    /// The output map's memory τ, s (0.1..3600): the forgetting factor is exp(−Ts/τ).
+    #[arg(long, default_value_t = 2.0, value_parser = parse_positive)]
+    pub adapt_tau_s: f64,
+}
+
+/// How `simulate --model narmax` follows the plant.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum Adapt {
+    /// The identified model alone.
+    Off,
+    /// An affine map of the model's output fitted on line to the measurements.
+    OutputMap,
 }
 
 /// Options of `pumpbench steady` (their documentation is their help text).

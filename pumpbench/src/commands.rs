@@ -2,9 +2,9 @@
 //! inputs read and the work done by the command's module.
 
 use crate::cli::{
-    check_optional_output, need_weights, weights_input, BenchDataArgs, ExciteArgs, ExportArgs,
-    IdentifyArgs, Model, ModelChoice, PlantArgs, Precision, SimulateArgs, SteadyArgs, StudyArgs,
-    ValidateArgs, VfdSimArgs,
+    check_optional_output, need_weights, weights_input, Adapt, BenchDataArgs, ExciteArgs,
+    ExportArgs, IdentifyArgs, Model, ModelChoice, PlantArgs, Precision, SimulateArgs, SteadyArgs,
+    StudyArgs, ValidateArgs, VfdSimArgs,
 };
 use crate::error::Failure;
 use crate::{
@@ -253,12 +253,19 @@ pub fn simulate(a: SimulateArgs) -> Result<(), Failure> {
         step_ms,
         input,
         output,
+        adapt,
+        adapt_tau_s,
     } = a;
     let mut inputs = vec![("--input", input.as_path())];
     inputs.extend(weights.as_deref().map(|w| ("--weights", w)));
     check_optional_output(&inputs, output.as_deref())?;
     match model {
         Model::Whitebox => {
+            if adapt != Adapt::Off {
+                return Err(Failure::usage(
+                    "--adapt is for NARMAX models (--model narmax)".into(),
+                ));
+            }
             let data = input::read_input_to_integrate(&input, step_ms, simulate::TOO_MANY_STEPS)?;
             let step_s = step_ms * 1e-3;
             output::write_csv(output.as_deref(), |w| match precision {
@@ -271,10 +278,14 @@ pub fn simulate(a: SimulateArgs) -> Result<(), Failure> {
         }
         Model::Narmax => {
             let m = need_weights(weights)?;
-            let series = narmaxcmd::read_for_model(&m, &input, false)?;
+            let adapt = match adapt {
+                Adapt::Off => None,
+                Adapt::OutputMap => Some(adapt_tau_s),
+            };
+            let series = narmaxcmd::read_for_model(&m, &input, adapt.is_some())?;
             with_narmax!(m, precision, |model| output::write_csv(
                 output.as_deref(),
-                |w| { narmaxcmd::simulate(&model, &m, &series, w) }
+                |w| { narmaxcmd::simulate(&model, &m, &series, adapt, w) }
             ))
         }
     }

@@ -270,6 +270,75 @@ pub fn free_run<M: Predictor>(m: &M, series: &Series) -> Result<Vec<f64>, Failur
     Ok(out)
 }
 
+/// The transmitter span of a target, physical units: readings at or beyond it are the
+/// controller's clamped values, not measurements (`model_core::transmitter`).
+pub fn span(target: Target) -> (f64, f64) {
+    let l = match target {
+        Target::Pressure => model_core::transmitter::PRESSURE_LOOP,
+        Target::Flow => model_core::transmitter::FLOW_LOOP,
+    };
+    (f64::from(l.value_at_4ma), f64::from(l.value_at_20ma))
+}
+
+/// [`free_run`] followed by the output map (`model_core::narmax::adapt`, memory `tau_s`): each
+/// row's output is the map of the network's free-run output, then the row's measurement
+/// (inside [`span`]) updates the map. The seed rows are as in [`free_run`]. Reports on stderr
+/// how many rows the map took and how often it fell back to the identity.
+pub fn free_run_adapted<M: Predictor>(
+    model: &M,
+    m: &ModelFile,
+    series: &Series,
+    tau_s: f64,
+) -> Result<Vec<f64>, Failure> {
+    use model_core::narmax::adapt::{OutputMap, TAU_RANGE_S};
+    let v = M::Value::from_f64;
+    let y = series
+        .y
+        .as_ref()
+        .ok_or_else(|| usage(format!("--adapt needs the {} column", m.target.column())))?;
+    let mut map =
+        OutputMap::new(model.output_scaling(), v(m.sample_period_s), v(tau_s)).map_err(|_| {
+            usage(format!(
+                "--adapt-tau-s {}: must be within {}..={} s",
+                Short(tau_s),
+                TAU_RANGE_S.0,
+                TAU_RANGE_S.1
+            ))
+        })?;
+    let u = &series.torque_ref_pct;
+    let start = model.lags().max_lag().min(u.len());
+    let mut st = model.state_at(v(u[0]), v(y[0]));
+    let mut out = Vec::with_capacity(u.len());
+    for k in 0..start {
+        model.seed(&mut st, v(u[k]), v(y[k]));
+        out.push(y[k]);
+    }
+    let (lo, hi) = span(m.target);
+    let (mut taken, mut resets, mut clamped) = (0usize, 0usize, 0usize);
+    for k in start..u.len() {
+        let o = model.simulate_step(&mut st, v(u[k]));
+        clamped += usize::from(o.clamped);
+        out.push(map.output(o.y).to_f64());
+        if y[k] > lo && y[k] < hi {
+            let r = map.update(o.y, v(y[k]));
+            taken += usize::from(r.taken);
+            resets += usize::from(r.diverged);
+        }
+    }
+    if clamped > 0 {
+        eprintln!(
+            "pumpbench: {clamped} of {} free-run samples had regressors outside the training range (clamped)",
+            u.len() - start
+        );
+    }
+    eprintln!(
+        "pumpbench: output map (memory {} s): {taken} of {} rows taken, {resets} fallbacks to the identity",
+        Short(tau_s),
+        u.len() - start
+    );
+    Ok(out)
+}
+
 /// The model's steady output under a constant torque `u` (%); a model that does not settle is
 /// an error (code 1).
 pub fn steady_of<M: Predictor>(m: &M, u: f64) -> Result<f64, Failure> {
@@ -287,14 +356,19 @@ pub fn quantized(m: &ModelFile) -> Result<HostNarxQ15, Failure> {
     m.q15().map_err(|e| usage(e.to_string()))
 }
 
-/// `simulate --model narmax`.
+/// `simulate --model narmax`: the free run, alone or (`adapt_tau_s`) with the output map
+/// fitted on line to the series' measurements.
 pub fn simulate<M: Predictor>(
     model: &M,
     m: &ModelFile,
     series: &Series,
+    adapt_tau_s: Option<f64>,
     w: &mut dyn Write,
 ) -> Result<(), Failure> {
-    let y = free_run(model, series)?;
+    let y = match adapt_tau_s {
+        None => free_run(model, series)?,
+        Some(tau) => free_run_adapted(model, m, series, tau)?,
+    };
     writeln!(w, "t_s,torque_ref_pct,{}", m.target.column()).map_err(io)?;
     for ((t, u), v) in series.t_s.iter().zip(&series.torque_ref_pct).zip(&y) {
         writeln!(w, "{},{},{}", Short(*t), Short(*u), Short(*v)).map_err(io)?;

@@ -1,0 +1,267 @@
+//! `simulate --model narmax --adapt output-map`: a model identified on a bench's own record
+//! with the valve fixed, then that bench's record whose valve moves ±30 %, free run per valve
+//! segment against the truth (the protocol). Benches with seeds used nowhere else.
+
+mod common;
+use common::{ok, pumpbench, refused, Table};
+use std::path::Path;
+
+/// Valve segments: (from, to) s; the record's valve steps at 50, 100, 150, 200 s.
+const SEGMENTS: [(f64, f64); 5] = [
+    (10.0, 50.0),
+    (60.0, 100.0),
+    (110.0, 150.0),
+    (160.0, 200.0),
+    (210.0, 250.1),
+];
+
+fn run(args: &[&str]) -> String {
+    ok(&pumpbench(args), &args.join(" "))
+}
+
+/// The per-segment free-run MAPE (%) of `sim`'s `column` against `truth`'s `true_column`,
+/// from 10 s after each step (rows with a true value of 0 left out).
+fn segment_mape(sim: &str, column: &str, truth: &str, true_column: &str) -> Vec<f64> {
+    let (sim, truth) = (Table::parse(sim), Table::parse(truth));
+    let (t, y) = (sim.col("t_s"), sim.col(column));
+    let truth_at: std::collections::HashMap<u64, f64> = truth
+        .col("t_s")
+        .iter()
+        .zip(truth.col(true_column))
+        .map(|(t, v)| (t.to_bits(), v))
+        .collect();
+    SEGMENTS
+        .iter()
+        .map(|&(a, b)| {
+            let (mut sum, mut n) = (0.0, 0);
+            for (t, y) in t.iter().zip(&y) {
+                let v = truth_at[&t.to_bits()];
+                if *t >= a && *t < b && v != 0.0 {
+                    sum += ((y - v) / v).abs();
+                    n += 1;
+                }
+            }
+            assert!(n > 300, "{n} rows in {a}..{b}");
+            100.0 * sum / f64::from(n)
+        })
+        .collect()
+}
+
+/// One bench and one target: identify on the fixed-valve record, then the valve-step record
+/// through `simulate` with and without the map, in `precision`.
+fn case(
+    dir: &Path,
+    bench: &[&str],
+    target: &str,
+    ts_ms: &str,
+    sizes: [&str; 3],
+    seed: u64,
+) -> [Vec<f64>; 3] {
+    let p = |name: &str| dir.join(format!("{target}_{name}")).display().to_string();
+    let (u_id, u_val, id, val, model) = (
+        p("u_id.csv"),
+        p("u_val.csv"),
+        p("id.csv"),
+        p("val.csv"),
+        p("m.json"),
+    );
+    let s = |k: u64| (seed + k).to_string();
+    let id_s = if ts_ms == "50" { "600" } else { "1200" };
+    run(&[
+        "excite",
+        "--seed",
+        &s(0),
+        "--seconds",
+        id_s,
+        "--ts-ms",
+        ts_ms,
+        "--output",
+        &u_id,
+    ]);
+    run(&[
+        "excite",
+        "--seed",
+        &s(1),
+        "--seconds",
+        "250",
+        "--ts-ms",
+        ts_ms,
+        "--output",
+        &u_val,
+    ]);
+    let mut a = vec![
+        "bench-data",
+        "--input",
+        &u_id,
+        "--seed",
+        "3",
+        "--output",
+        &id,
+    ];
+    a.extend_from_slice(bench);
+    run(&a);
+    let mut a = vec![
+        "bench-data",
+        "--input",
+        &u_val,
+        "--seed",
+        "4",
+        "--truth",
+        "--output",
+        &val,
+        "--valve-steps",
+        "50:1.3,100:1,150:0.7,200:1",
+    ];
+    a.extend_from_slice(bench);
+    run(&a);
+    run(&[
+        "identify", "--data", &id, "--target", target, "--na", sizes[0], "--nb", sizes[1],
+        "--hidden", sizes[2], "--output", &model,
+    ]);
+    let truth = std::fs::read_to_string(&val).unwrap();
+    let column = format!(
+        "{target}_{}",
+        if target == "pressure" { "mca" } else { "lps" }
+    );
+    let true_column = format!("{target}_true");
+    let sim = |precision: &str, adapt: &str| {
+        let out = run(&[
+            "simulate",
+            "--model",
+            "narmax",
+            "--weights",
+            &model,
+            "--input",
+            &val,
+            "--precision",
+            precision,
+            "--adapt",
+            adapt,
+        ]);
+        segment_mape(&out, &column, &truth, &true_column)
+    };
+    [
+        sim("q15", "off"),
+        sim("q15", "output-map"),
+        sim("f64", "output-map"),
+    ]
+}
+
+/// The targets: every valve segment ≤ 1.5 %, the fixed valve no worse than the model
+/// alone by more than 0.1 point, Q15 within 0.1 point of f64. `missed`: the segments that
+/// miss the 1.5 % (measured, documented in docs/narmax.md); each must still be ten times
+/// better than the model alone.
+fn check(what: &str, [off, q15, f64_]: [Vec<f64>; 3], missed: &[usize]) {
+    let show = |v: &[f64]| {
+        v.iter()
+            .map(|x| format!("{x:.2}"))
+            .collect::<Vec<_>>()
+            .join(" / ")
+    };
+    println!(
+        "{what}: off {}, output map q15 {}, f64 {}",
+        show(&off),
+        show(&q15),
+        show(&f64_)
+    );
+    assert!(
+        off[1..].iter().any(|&x| x > 3.0),
+        "{what}: the valve steps must matter: {off:?}"
+    );
+    for (k, (&a, &b)) in q15.iter().zip(&f64_).enumerate() {
+        if missed.contains(&k) {
+            assert!(
+                a > 1.5,
+                "{what}: segment {k} now meets the target: update the docs"
+            );
+            assert!(
+                a * 10.0 < off[k],
+                "{what}: segment {k}: {a:.2} % against {:.2}",
+                off[k]
+            );
+        } else {
+            assert!(a <= 1.5, "{what}: segment {k}: {a:.2} % > 1.5 %");
+        }
+        assert!(
+            (a - b).abs() <= 0.1,
+            "{what}: segment {k}: q15 {a:.3} vs f64 {b:.3}"
+        );
+    }
+    assert!(
+        q15[0] <= off[0] + 0.1,
+        "{what}: fixed valve {:.3} vs {:.3}",
+        q15[0],
+        off[0]
+    );
+}
+
+#[test]
+fn the_output_map_follows_the_valve_pressure_and_flow() {
+    let dir = tempfile::tempdir().unwrap();
+    let bench = ["--curve-error", "-4,6", "--drive-lag-ms", "15"];
+    // The valve ×0.7 segment misses: 2.10 % (the pump at 5..10 % torque gives 0.02..0.3 mca
+    // there, where a few mm are several percent; the best static affine map of the whole
+    // segment, fitted afterwards, is 2.19 %).
+    check(
+        "pressure",
+        case(dir.path(), &bench, "pressure", "50", ["6", "6", "7"], 901),
+        &[3],
+    );
+    check(
+        "flow",
+        case(dir.path(), &bench, "flow", "100", ["7", "7", "6"], 911),
+        &[],
+    );
+}
+
+#[test]
+fn bad_adaptation_options_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let input = common::write(d, "u.csv", "t_s,torque_ref_pct\n0,10\n0.05,20\n");
+    let r = pumpbench(&[
+        "simulate",
+        "--model",
+        "whitebox",
+        "--input",
+        &input,
+        "--adapt",
+        "output-map",
+    ]);
+    refused(&r, &["--adapt is for NARMAX models"], "white box");
+    let r = pumpbench(&[
+        "simulate",
+        "--model",
+        "narmax",
+        "--weights",
+        "../models/pressure.json",
+        "--input",
+        &input,
+        "--adapt",
+        "output-map",
+    ]);
+    refused(&r, &["pressure_mca"], "no measurement column");
+    let rec = common::write(
+        d,
+        "r.csv",
+        &(0..40)
+            .map(|k| format!("{},30,2.0\n", f64::from(k) * 0.05))
+            .fold("t_s,torque_ref_pct,pressure_mca\n".to_string(), |s, l| {
+                s + &l
+            }),
+    );
+    let r = pumpbench(&[
+        "simulate",
+        "--model",
+        "narmax",
+        "--weights",
+        "../models/pressure.json",
+        "--input",
+        &rec,
+        "--adapt",
+        "output-map",
+        "--adapt-tau-s",
+        "0.01",
+    ]);
+    refused(&r, &["--adapt-tau-s 0.01"], "memory too short");
+}
