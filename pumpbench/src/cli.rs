@@ -43,7 +43,8 @@ pub enum Command {
     /// that drives a virtual bench in real time. For host tests over a pseudo-terminal pair
     /// and for the firmware in QEMU (`cargo xtask qemu --vfd PTY`). Logs a line a second.
     VfdSim(VfdSimArgs),
-    /// Simulate a torque-reference input; one output row per input row.
+    /// Simulate a torque-reference input; one output row per input row (NARMAX: per row
+    /// whose target cell, if the column is there, is filled).
     ///
     /// The bench starts at the steady state of the first row's torque; each row's torque is
     /// held until the next row's time. Output columns: t_s, torque_ref_pct, speed_rpm,

@@ -696,6 +696,16 @@ pub fn read_series(path: &Path, y_column: &str, required: bool) -> Result<Series
         });
     };
     let keep: Vec<usize> = (0..cells.len()).filter(|&k| cells[k].is_some()).collect();
+    let empty_cell = |k: usize| {
+        InputError {
+        path: path.to_path_buf(),
+        line: Some(lines[k]),
+        column: Some((y_col + 1, y_column.to_string())),
+        message: format!(
+            "empty cell inside the record: a missing {y_column} sample (the rows around it are uniformly sampled only with it)"
+        ),
+    }
+    };
     if keep.is_empty() {
         return Err(InputError {
             path: path.to_path_buf(),
@@ -707,7 +717,32 @@ pub fn read_series(path: &Path, y_column: &str, required: bool) -> Result<Series
     let pick = |v: &[f64]| keep.iter().map(|&k| v[k]).collect::<Vec<f64>>();
     let t_s = pick(&input.t_s);
     let kept_lines: Vec<u64> = keep.iter().map(|&k| lines[k]).collect();
-    let mean_step = check_uniform(path, &t_s, &kept_lines)?;
+    let mean_step = check_uniform(path, &t_s, &kept_lines).map_err(|e| {
+        // Where the target is sampled on every row (its rows as close as the file's), a gap
+        // that an empty cell made is named by that cell; where it is sampled on every other
+        // row (the record's flow), the empty cells are its own, and the gap a lost row.
+        let median = |t: &[f64]| {
+            let mut d: Vec<f64> = t.windows(2).map(|p| p[1] - p[0]).collect();
+            d.sort_by(f64::total_cmp);
+            d.get(d.len() / 2).copied().unwrap_or(0.0)
+        };
+        let (all, kept) = (median(&input.t_s), median(&t_s));
+        let every_row = (kept - all).abs() <= MAX_JITTER * all;
+        let (first, last) = (keep[0], keep[keep.len() - 1]);
+        match (first..last).find(|&k| cells[k].is_none()) {
+            Some(k) if every_row => empty_cell(k),
+            _ => e,
+        }
+    })?;
+    let left_out = cells.len() - keep.len();
+    if left_out > 0 {
+        eprintln!(
+            "pumpbench: {}: {left_out} of {} rows have an empty {y_column} cell: left out, {} rows taken",
+            path.display(),
+            cells.len(),
+            keep.len()
+        );
+    }
     Ok(Series {
         t_s,
         torque_ref_pct: pick(&input.torque_ref_pct),
@@ -896,10 +931,18 @@ mod series_tests {
         let lost = RECORD.replace("0.100,30,1.7,6\n", "");
         let e = read(&lost, "flow_lps", true).unwrap_err();
         assert!(e.contains("not uniformly sampled"), "{e}");
-        // The pressure in fault at 0.100 s (an empty cell) is a gap in the pressure.
+        // The pressure in fault at 0.100 s (an empty cell) is a gap in the pressure, named.
         let fault = RECORD.replace("0.100,30,1.7,6", "0.100,30,,6");
         let e = read(&fault, "pressure_mca", true).unwrap_err();
-        assert!(e.contains("not uniformly sampled"), "{e}");
+        assert!(
+            e.starts_with("F:4:3 (pressure_mca): empty cell inside the record"),
+            "{e}"
+        );
+        // Empty cells at the start or the end only: the rows left are taken.
+        let ends = RECORD
+            .replace("0.000,10,1.5,5", "0.000,10,,5")
+            .replace("0.300,70,2.1,8", "0.300,70,,8");
+        assert_eq!(read(&ends, "pressure_mca", true).unwrap().t_s.len(), 5);
         let none = "t_s,torque_ref_pct,flow_lps\n0,1,\n1,2,\n";
         let e = read(none, "flow_lps", true).unwrap_err();
         assert!(e.contains("no row has a value of flow_lps"), "{e}");

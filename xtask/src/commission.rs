@@ -122,7 +122,8 @@ pub fn commission_check() -> Result<String> {
             after[k],
             after[k] / before[k]
         ));
-        if after[k].is_nan() || after[k] >= before[k] {
+        // Also fails if either is NaN.
+        if after[k].partial_cmp(&before[k]) != Some(std::cmp::Ordering::Less) {
             return Err(format!(
                 "{report}commissioning: the re-identified {name} model's residuals did not drop"
             ));

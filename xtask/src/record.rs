@@ -5,7 +5,7 @@
 //! is.
 //!
 //! - QEMU: the board's log is defmt over semihosting, which does not drop a frame; the run is
-//!   deterministic (`-icount`) and faster than real time (600 s of loop time in ≈ 100 s).
+//!   deterministic (`-icount`) and faster than real time (600 s of loop time in 86 s here).
 //! - NUCLEO-F446RE (`--nucleo`): the image built with feature `record`, run by `probe-rs run`,
 //!   its defmt over RTT printed as text (`--log-format {s}`); rows the RTT buffer dropped
 //!   show as gaps.
@@ -20,8 +20,8 @@ use std::time::{Duration, Instant};
 
 /// `cargo xtask record`'s usage.
 pub const RECORD_USAGE: &str = "usage: cargo xtask record --seconds N --output REC.csv [--seed N] [--narmax f32|q15] [--head 800..1200] [--torque 800..1200] [--nucleo]
-  runs the controller in mode 2 (the paper's excitation) for N s of loop time (1..=86400) and
-  writes its commissioning record: a row per pressure sample (50 ms with the shipped models),
+  runs the QEMU controller in mode 2 (the paper's excitation) for N s of loop time
+  (1..=86400) and writes its commissioning record: a row per pressure sample (50 ms with the shipped models),
   t_s,torque_ref_pct,pressure_mca,flow_lps,speed_rpm,observer_k2,observer_flow_lps,alarms,
   status,seq; the flow on its own samples (every other row), an empty cell for a reading in
   fault. `pumpbench identify --data REC.csv --target pressure|flow` takes it as it is.
@@ -29,8 +29,10 @@ pub const RECORD_USAGE: &str = "usage: cargo xtask record --seconds N --output R
   --narmax f32|q15  the NARMAX arithmetic (default f32)
   --head, --torque  the virtual bench's pump-head and load-torque curves, per mille of the
                     paper's (defaults 1000 and 1020: a bench the shipped models fit)
-  --nucleo          record from a NUCLEO-F446RE with probe-rs (no QEMU; --seed, --head and
-                    --torque do not apply: the bench is real)";
+  --nucleo          record from a NUCLEO-F446RE with probe-rs (the image with feature
+                    `record`, flashed): N s of loop time from the board's start; the board
+                    starts stopped, so write mode 2 over SCADA (holding register 1) to run
+                    the excitation; --seed, --narmax, --head and --torque do not apply";
 
 /// Options of `cargo xtask record`.
 #[derive(Debug, Clone, PartialEq)]
@@ -65,6 +67,7 @@ impl RecordOptions {
         };
         let (mut seconds, mut output) = (None, None);
         let mut curves = false;
+        let mut bench_only = false;
         let mut it = args.iter();
         let bad = |what: String| format!("{what}\n{RECORD_USAGE}");
         while let Some(a) = it.next() {
@@ -88,12 +91,16 @@ impl RecordOptions {
             match a.as_str() {
                 "--seconds" => seconds = Some(whole("--seconds", value(a)?, 1..=86_400)?),
                 "--output" => output = Some(PathBuf::from(value(a)?)),
-                "--seed" => o.seed = whole("--seed", value(a)?, 0..=u32::MAX)?,
+                "--seed" => {
+                    o.seed = whole("--seed", value(a)?, 0..=u32::MAX)?;
+                    bench_only = true;
+                }
                 "--narmax" => {
                     o.narmax = value(a)?;
                     if o.narmax != "f32" && o.narmax != "q15" {
                         return Err(bad(format!("--narmax {}: f32 or q15", o.narmax)));
                     }
+                    bench_only = true;
                 }
                 "--head" => (o.head, curves) = (whole("--head", value(a)?, 800..=1200)?, true),
                 "--torque" => {
@@ -108,6 +115,11 @@ impl RecordOptions {
         if o.nucleo && curves {
             return Err(bad(
                 "--head and --torque set the virtual bench's curves: not with --nucleo".into(),
+            ));
+        }
+        if o.nucleo && bench_only {
+            return Err(bad(
+                "--seed and --narmax are the QEMU board's start-up arguments: not with --nucleo (write SCADA holding register 2 for the arithmetic)".into(),
             ));
         }
         Ok(o)
@@ -158,16 +170,19 @@ pub fn parse_row(line: &str) -> Result<RecordRow> {
     })
 }
 
-/// The CSV being written: the rows in their order, the numbers checked.
+/// The CSV being written: the rows in their order, the numbers checked. It is written to
+/// `<output>.partial` and renamed to the output by [`RecordWriter::finish`]; a record that
+/// fails before that leaves no CSV behind (and an older one at the output as it was).
 pub struct RecordWriter {
-    out: std::io::BufWriter<std::fs::File>,
+    out: Option<std::io::BufWriter<std::fs::File>>,
     path: PathBuf,
+    partial: PathBuf,
     next: Option<u32>,
     /// Rows written.
     pub rows: u64,
     /// Rows with a flow reading.
     pub flow_rows: u64,
-    /// Rows missing between those written (gaps in the numbers).
+    /// Rows missing between those written, or before the first (gaps in the numbers).
     pub lost: u64,
     /// The first gaps: (first missing number, how many).
     pub gaps: Vec<(u32, u32)>,
@@ -176,13 +191,17 @@ pub struct RecordWriter {
 }
 
 impl RecordWriter {
-    /// Creates `path` (replacing it) and writes the header.
+    /// Starts the CSV for `path` (in `<path>.partial`) and writes the header.
     pub fn create(path: &Path) -> Result<Self> {
-        let file = std::fs::File::create(path)
-            .map_err(|e| format!("cannot write {}: {e}", path.display()))?;
+        let mut partial = path.as_os_str().to_owned();
+        partial.push(".partial");
+        let partial = PathBuf::from(partial);
+        let file = std::fs::File::create(&partial)
+            .map_err(|e| format!("cannot write {}: {e}", partial.display()))?;
         let mut w = Self {
-            out: std::io::BufWriter::new(file),
+            out: Some(std::io::BufWriter::new(file)),
             path: path.to_path_buf(),
+            partial,
             next: None,
             rows: 0,
             flow_rows: 0,
@@ -195,27 +214,32 @@ impl RecordWriter {
     }
 
     fn line(&mut self, text: &str) -> Result {
-        writeln!(self.out, "{text}").map_err(|e| format!("{}: {e}", self.path.display()))
+        let out = self.out.as_mut().ok_or("the record is closed")?;
+        writeln!(out, "{text}").map_err(|e| format!("{}: {e}", self.partial.display()))
     }
 
-    /// Writes `row`; a row whose number is not the next one's is a gap (counted, the rows
-    /// missing not written), one numbered before it an error.
+    fn gap(&mut self, first: u32, missing: u32) {
+        self.lost += u64::from(missing);
+        if self.gaps.len() < 10 {
+            self.gaps.push((first, missing));
+        }
+    }
+
+    /// Writes `row`. The first row must be number 0 (rows before it are counted lost); a row
+    /// whose number is not the next one's is a gap (counted, the rows missing not written); a
+    /// row numbered before it is an error (the board restarted: a watchdog reset, a power
+    /// cut).
     pub fn push(&mut self, row: &RecordRow) -> Result {
-        if let Some(next) = self.next {
-            if row.seq < next {
-                return Err(format!(
-                    "record row {} came after row {}: out of order",
-                    row.seq,
-                    next - 1
-                ));
-            }
-            if row.seq > next {
-                let missing = row.seq - next;
-                self.lost += u64::from(missing);
-                if self.gaps.len() < 10 {
-                    self.gaps.push((next, missing));
-                }
-            }
+        let next = self.next.unwrap_or(0);
+        if row.seq < next {
+            return Err(format!(
+                "record row {} came after row {}: the board restarted (a reset?): no CSV written",
+                row.seq,
+                next - 1
+            ));
+        }
+        if row.seq > next {
+            self.gap(next, row.seq - next);
         }
         self.next = row.seq.checked_add(1);
         let ryu = |x: f32| {
@@ -233,15 +257,35 @@ impl RecordWriter {
         Ok(())
     }
 
-    /// Flushes the file; the summary line, or an error if rows were lost (the CSV is kept:
+    /// Ends the record made by `source`, which should have run to `end_ms` of loop time:
+    /// the CSV renamed to the output, and the summary line; an error if no row came, if the
+    /// record stops short of `end_ms` (no CSV then), or if rows were lost (the CSV is kept:
     /// `identify` refuses its gaps).
-    pub fn finish(mut self, source: &str) -> Result<String> {
-        self.out
-            .flush()
-            .map_err(|e| format!("{}: {e}", self.path.display()))?;
+    pub fn finish(mut self, source: &str, end_ms: u32) -> Result<String> {
+        let mut out = self.out.take().ok_or("the record is closed")?;
+        out.flush()
+            .map_err(|e| format!("{}: {e}", self.partial.display()))?;
+        drop(out);
+        if self.rows == 0 || self.last_t_ms < end_ms {
+            let _ = std::fs::remove_file(&self.partial);
+        }
         if self.rows == 0 {
             return Err(format!("{source}: no record row arrived"));
         }
+        if self.last_t_ms < end_ms {
+            return Err(format!(
+                "{source}: the record stops at {} s, short of {} s: no CSV written",
+                f64::from(self.last_t_ms) / 1000.0,
+                f64::from(end_ms) / 1000.0
+            ));
+        }
+        std::fs::rename(&self.partial, &self.path).map_err(|e| {
+            format!(
+                "cannot rename {} to {}: {e}",
+                self.partial.display(),
+                self.path.display()
+            )
+        })?;
         let summary = format!(
             "record: {} rows to {} s ({} with a flow reading), {} lost, from {source} -> {}",
             self.rows,
@@ -265,14 +309,25 @@ impl RecordWriter {
     }
 }
 
+impl Drop for RecordWriter {
+    /// A record that did not reach [`RecordWriter::finish`] leaves no partial CSV behind.
+    fn drop(&mut self) {
+        if self.out.take().is_some() {
+            let _ = std::fs::remove_file(&self.partial);
+        }
+    }
+}
+
 /// Longest a QEMU record may take on the wall clock for `seconds` of loop time: QEMU runs
-/// ≈ 6 times faster than real time here; real time is the bound.
+/// ≈ 7 times faster than real time here (600 s in 86 s); real time is the bound.
 fn qemu_wall_limit(seconds: u32) -> Duration {
     Duration::from_secs(60 + u64::from(seconds))
 }
 
 /// The record from the QEMU board `elf` (on its virtual bench, with `o`'s options) into
-/// `o.output`; the summary.
+/// `o.output`; the summary. A row the log channel dropped (the board warns) is a gap; any
+/// other warning is reported; an error, QEMU's end before the record's, or the time limit
+/// end it without a CSV.
 pub fn record_qemu(elf: &Path, o: &RecordOptions) -> Result<String> {
     let args = o.firmware_args();
     let mut cmd = qemu_command(elf, &args);
@@ -285,23 +340,32 @@ pub fn record_qemu(elf: &Path, o: &RecordOptions) -> Result<String> {
         o.seconds,
         args.join(" ")
     );
-    let (_qemu, lines) = spawn_with_lines(elf, cmd, false)?;
+    let (mut qemu, lines) = spawn_with_lines(elf, cmd, false)?;
     let mut w = RecordWriter::create(&o.output)?;
     let start = Instant::now();
     let deadline = start + qemu_wall_limit(o.seconds);
     let mut header = None;
     let mut shown = 0;
+    let mut other = vec![];
+    let mut warnings = vec![];
     loop {
         let left = deadline.saturating_duration_since(Instant::now());
         let line = match lines.recv_timeout(left) {
             Ok(l) => l,
             Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {
                 return Err(format!(
-                    "record: no end after {} s on the wall clock",
+                    "record: no end after {} s on the wall clock: no CSV written",
                     qemu_wall_limit(o.seconds).as_secs()
                 ))
             }
-            Err(_) => return Err("record: QEMU ended before the record did".into()),
+            Err(_) => {
+                let status = qemu.0.wait().map(|s| s.to_string()).unwrap_or_default();
+                let tail = other[other.len().saturating_sub(5)..].join("\n");
+                return Err(format!(
+                    "record: QEMU ended ({status}) before the record did, at {} s: no CSV written\n{tail}",
+                    f64::from(w.last_t_ms) / 1000.0
+                ));
+            }
         };
         if line.starts_with("rec ") {
             w.push(&parse_row(&line)?)?;
@@ -324,9 +388,19 @@ pub fn record_qemu(elf: &Path, o: &RecordOptions) -> Result<String> {
                 return Err(format!("record: the board lost serial bytes: {line}"));
             }
             break;
-        } else if line.starts_with("ERROR") || line.starts_with("WARN") {
-            return Err(format!("record: the board says: {line}"));
+        } else if line.starts_with("ERROR") {
+            return Err(format!("record: the board says: {line}: no CSV written"));
+        } else if line.starts_with("WARN") {
+            // A dropped row shows as a gap in the numbers; the rest is reported.
+            if !line.contains("record row") {
+                warnings.push(line);
+            }
+        } else if !line.starts_with("t_s=") && !line.starts_with("margin:") {
+            other.push(line);
         }
+    }
+    for w in &warnings {
+        eprintln!("record: the board warned: {w}");
     }
     let header = header.ok_or("record: no 'firmware:' header line")?;
     let source = format!(
@@ -336,17 +410,28 @@ pub fn record_qemu(elf: &Path, o: &RecordOptions) -> Result<String> {
         field(&header, "head")?,
         field(&header, "torque")?
     );
-    w.finish(&source)
+    w.finish(&source, o.seconds * 1000)
+}
+
+/// probe-rs, killed when dropped.
+struct Probe(std::process::Child);
+impl Drop for Probe {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
 }
 
 /// The record from a NUCLEO-F446RE: the image with feature `record` built and run by
-/// `probe-rs run` (flashed, then its RTT log as text), rows until `o.seconds`.
+/// `probe-rs run` (flashed, then its RTT log as text with its level), rows until
+/// `o.seconds` of loop time since the board's start. An error line, probe-rs's end before
+/// the record's, a restart of the board, or 30 s without a row end it without a CSV.
 fn record_nucleo(o: &RecordOptions) -> Result<String> {
     use std::io::BufRead;
     crate::board::build_nucleo_record()?;
     let elf = firmware_elf(Board::Nucleo);
     let mut child = std::process::Command::new("probe-rs")
-        .args(["run", "--chip", "STM32F446RETx", "--log-format", "{s}"])
+        .args(["run", "--chip", "STM32F446RETx", "--log-format", "{L} {s}"])
         .arg(&elf)
         .stdout(std::process::Stdio::piped())
         .spawn()
@@ -354,24 +439,48 @@ fn record_nucleo(o: &RecordOptions) -> Result<String> {
             format!("cannot start probe-rs (cargo install --locked probe-rs-tools): {e}")
         })?;
     let stdout = child.stdout.take().ok_or("no stdout")?;
-    let mut w = RecordWriter::create(&o.output)?;
-    let end_ms = o.seconds * 1000;
-    for line in std::io::BufReader::new(stdout).lines() {
-        let line = line.map_err(|e| format!("probe-rs: {e}"))?;
-        if let Some(rec) = line.find("rec seq=").map(|k| &line[k..]) {
-            let row = parse_row(rec)?;
-            w.push(&row)?;
-            if row.t_ms >= end_ms {
+    let mut probe = Probe(child);
+    let (tx, lines) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        for line in std::io::BufReader::new(stdout)
+            .lines()
+            .map_while(|l| l.ok())
+        {
+            if tx.send(line).is_err() {
                 break;
             }
-        } else if line.contains("ERROR") {
-            let _ = child.kill();
-            return Err(format!("record: the board says: {line}"));
+        }
+    });
+    let mut w = RecordWriter::create(&o.output)?;
+    let end_ms = o.seconds * 1000;
+    eprintln!(
+        "==> record: {} s from the NUCLEO-F446RE (write mode 2 over SCADA to run the excitation)",
+        o.seconds
+    );
+    while w.last_t_ms < end_ms || w.rows == 0 {
+        let line = match lines.recv_timeout(Duration::from_secs(30)) {
+            Ok(l) => l,
+            Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {
+                return Err("record: no line from probe-rs in 30 s: no CSV written".into())
+            }
+            Err(_) => {
+                let status = probe.0.wait().map(|s| s.to_string()).unwrap_or_default();
+                return Err(format!(
+                    "record: probe-rs ended ({status}) at {} s of the record: no CSV written",
+                    f64::from(w.last_t_ms) / 1000.0
+                ));
+            }
+        };
+        if let Some(k) = line.find("rec seq=") {
+            w.push(&parse_row(&line[k..])?)?;
+        } else if line.starts_with("ERROR") {
+            return Err(format!("record: the board says: {line}: no CSV written"));
+        } else if line.starts_with("WARN") && !line.contains("record row") {
+            eprintln!("record: the board warned: {line}");
         }
     }
-    let _ = child.kill();
-    let _ = child.wait();
-    w.finish("the NUCLEO-F446RE (probe-rs, RTT)")
+    drop(probe);
+    w.finish("the NUCLEO-F446RE (probe-rs, RTT)", end_ms)
 }
 
 #[cfg(test)]
@@ -408,6 +517,14 @@ mod tests {
             (
                 "--seconds 5 --output r --nucleo --torque 900",
                 "--head and --torque set",
+            ),
+            (
+                "--seconds 5 --output r --nucleo --seed 3",
+                "--seed and --narmax are",
+            ),
+            (
+                "--seconds 5 --output r --narmax q15 --nucleo",
+                "--seed and --narmax are",
             ),
             ("--seconds 5 --output r --fast", "unknown option '--fast'"),
             ("--seconds", "--seconds needs a value"),
@@ -449,8 +566,8 @@ mod tests {
         for seq in [0, 1, 2, 5, 6] {
             w.push(&row(seq)).unwrap();
         }
-        assert!(w.push(&row(4)).unwrap_err().contains("out of order"));
-        let e = w.finish("test").unwrap_err();
+        assert!(w.push(&row(4)).unwrap_err().contains("the board restarted"));
+        let e = w.finish("test", 300).unwrap_err();
         assert!(
             e.contains("5 rows to 0.3 s (3 with a flow reading), 2 lost"),
             "{e}"
@@ -465,11 +582,29 @@ mod tests {
         );
         assert_eq!(lines[2], "0.050,12.5,0.33333334,,1000.0,0.1082,7.0,0,9,1");
         assert_eq!(lines.len(), 6);
+        // A record that stops short leaves no CSV, and the one before stays.
         let mut w = RecordWriter::create(&path).unwrap();
         w.push(&row(0)).unwrap();
-        assert!(w.finish("test").unwrap().contains("1 rows to 0 s"));
+        w.push(&row(1)).unwrap();
+        let e = w.finish("test", 100).unwrap_err();
+        assert!(e.contains("stops at 0.05 s, short of 0.1 s"), "{e}");
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), text);
+        let mut w = RecordWriter::create(&path).unwrap();
+        w.push(&row(0)).unwrap();
+        assert!(w.finish("test", 0).unwrap().contains("1 rows to 0 s"));
         let w = RecordWriter::create(&path).unwrap();
-        assert!(w.finish("test").unwrap_err().contains("no record row"));
+        assert!(w.finish("test", 0).unwrap_err().contains("no record row"));
+        // Rows lost before the first one that came are counted; a record dropped before its
+        // end leaves nothing.
+        let mut w = RecordWriter::create(&dir.join("late.csv")).unwrap();
+        w.push(&row(3)).unwrap();
+        let e = w.finish("test", 150).unwrap_err();
+        assert!(e.contains("3 lost") && e.contains("3 from row 0"), "{e}");
+        let mut w = RecordWriter::create(&dir.join("dropped.csv")).unwrap();
+        w.push(&row(0)).unwrap();
+        drop(w);
+        assert!(!dir.join("dropped.csv").exists() && !dir.join("dropped.csv.partial").exists());
+        assert!(!dir.join("r.csv.partial").exists());
         let _ = std::fs::remove_dir_all(dir);
     }
 

@@ -120,7 +120,8 @@ pub fn host_replay(header: &str, run_ms: u32) -> Result<(Vec<String>, Vec<String
         load_torque_factor: per_mille("torque")?,
         ..VirtualBenchConfig::default_offsets(seed)
     };
-    let record = field(header, "record")? == "true";
+    // `record=true` may be followed by the header's ", runs until stopped".
+    let record = field(header, "record")?.trim_end_matches(',') == "true";
     let mut board = VirtualBoard::new(&config, p, q, bench).map_err(e)?;
     let (pp, fp) = board.controller.sample_periods_ms();
     let (mut lines, mut rows) = (vec![], vec![]);

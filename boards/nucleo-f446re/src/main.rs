@@ -319,12 +319,12 @@ mod app {
 
         board_common::start_systick(cp.SYST, SYSCLK_HZ / 1000 - 1);
 
+        #[cfg_attr(not(feature = "record"), allow(unused_mut))]
         let mut links = board_common::tasks::links();
         // The commissioning record (`cargo xtask record --nucleo`): a row per pressure
-        // sample over RTT, in the image built with feature `record`.
-        if cfg!(feature = "record") {
-            links.step.record(core.sample_periods_ms());
-        }
+        // sample over RTT, in the image built with feature `record` only.
+        #[cfg(feature = "record")]
+        links.step.record(core.sample_periods_ms());
 
         // The watchdog last, so that a slow start-up cannot reset the board in a loop;
         // frozen while a debugger halts the core.

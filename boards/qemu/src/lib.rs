@@ -45,7 +45,7 @@ fn hard_fault(ef: Option<&board_common::fault::ExceptionFrame>) -> ! {
 }
 
 /// A panic is logged once, with its source location, and exits QEMU with status 1. The
-/// message is not formatted: that links `core::fmt` (≈ 2 KB of the 64 KiB image) for a path
+/// message is not formatted: that links `core::fmt` (≈ 1.4 KB of the 64 KiB image) for a path
 /// that only a bug takes, and the file and line find it.
 #[panic_handler]
 fn panic(info: &core::panic::PanicInfo) -> ! {
