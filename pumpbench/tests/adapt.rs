@@ -229,18 +229,27 @@ fn bad_adaptation_options_are_refused() {
         "output-map",
     ]);
     refused(&r, &["--adapt is for NARMAX models"], "white box");
-    let r = pumpbench(&[
-        "simulate",
-        "--model",
-        "narmax",
-        "--weights",
-        "../models/pressure.json",
-        "--input",
-        &input,
-        "--adapt",
-        "output-map",
-    ]);
-    refused(&r, &["pressure_mca"], "no measurement column");
+    // The shipped pressure model with the map on `input`, and `extra` options.
+    let adapted = |input: &str, extra: &[&str]| {
+        let mut a = vec![
+            "simulate",
+            "--model",
+            "narmax",
+            "--weights",
+            "../models/pressure.json",
+            "--input",
+            input,
+            "--adapt",
+            "output-map",
+        ];
+        a.extend_from_slice(extra);
+        pumpbench(&a)
+    };
+    refused(
+        &adapted(&input, &[]),
+        &["pressure_mca"],
+        "no measurement column",
+    );
     let rec = common::write(
         d,
         "r.csv",
@@ -250,18 +259,6 @@ fn bad_adaptation_options_are_refused() {
                 s + &l
             }),
     );
-    let r = pumpbench(&[
-        "simulate",
-        "--model",
-        "narmax",
-        "--weights",
-        "../models/pressure.json",
-        "--input",
-        &rec,
-        "--adapt",
-        "output-map",
-        "--adapt-tau-s",
-        "0.01",
-    ]);
+    let r = adapted(&rec, &["--adapt-tau-s", "0.01"]);
     refused(&r, &["--adapt-tau-s 0.01"], "memory too short");
 }
