@@ -248,15 +248,16 @@ pub struct SimulateArgs {
     pub output: Option<PathBuf>,
     /// NARMAX only: how the free run follows the plant. `off`: the identified model alone.
     /// `output-map`: the model runs free, its weights untouched, and an affine map of its
-    /// output is fitted on line to the input's measurements (the target column), as the
-    /// firmware does (model_core::narmax::adapt); each row's prediction is made before its
-    /// measurement is taken. Readings at or beyond the controller's transmitter spans
-    /// (0..10 mca, 0..30 l/s: clamped values) are not taken.
+    /// output is fitted on line to the input's measurements (the target column)
+    /// (model_core::narmax::adapt); each row's prediction is made before its measurement is
+    /// taken. Readings at or beyond the spans of the controller's transmitters (0..10 mca,
+    /// 0..30 l/s), which the controller clamps and does not take, are not taken.
     #[arg(long, value_enum, default_value = "off")]
     pub adapt: Adapt,
-    /// The output map's memory τ, s (0.1..3600): the forgetting factor is exp(−Ts/τ).
-    #[arg(long, default_value_t = 2.0, value_parser = parse_positive)]
-    pub adapt_tau_s: f64,
+    /// The output map's memory τ, s (0.1..60; default 2): the forgetting factor is
+    /// exp(−Ts/τ). Only with `--adapt output-map`.
+    #[arg(long, value_parser = parse_positive)]
+    pub adapt_tau_s: Option<f64>,
 }
 
 /// How `simulate --model narmax` follows the plant.

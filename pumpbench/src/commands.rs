@@ -241,6 +241,10 @@ pub fn study(a: StudyArgs) -> Result<(), Failure> {
     study::run(&study::Study { files, out })
 }
 
+/// The output map's memory when `--adapt-tau-s` is not given, s: long against the bench's
+/// time constants (0.2..0.7 s), short against a valve's move being followed.
+pub const DEFAULT_ADAPT_TAU_S: f64 = 2.0;
+
 /// `pumpbench simulate`.
 pub fn simulate(a: SimulateArgs) -> Result<(), Failure> {
     let SimulateArgs {
@@ -261,7 +265,7 @@ pub fn simulate(a: SimulateArgs) -> Result<(), Failure> {
     check_optional_output(&inputs, output.as_deref())?;
     match model {
         Model::Whitebox => {
-            if adapt != Adapt::Off {
+            if adapt != Adapt::Off || adapt_tau_s.is_some() {
                 return Err(Failure::usage(
                     "--adapt is for NARMAX models (--model narmax)".into(),
                 ));
@@ -278,9 +282,14 @@ pub fn simulate(a: SimulateArgs) -> Result<(), Failure> {
         }
         Model::Narmax => {
             let m = need_weights(weights)?;
-            let adapt = match adapt {
-                Adapt::Off => None,
-                Adapt::OutputMap => Some(adapt_tau_s),
+            let adapt = match (adapt, adapt_tau_s) {
+                (Adapt::Off, None) => None,
+                (Adapt::Off, Some(_)) => {
+                    return Err(Failure::usage(
+                        "--adapt-tau-s is the output map's: give --adapt output-map".into(),
+                    ))
+                }
+                (Adapt::OutputMap, tau) => Some(tau.unwrap_or(DEFAULT_ADAPT_TAU_S)),
             };
             let series = narmaxcmd::read_for_model(&m, &input, adapt.is_some())?;
             with_narmax!(m, precision, |model| output::write_csv(

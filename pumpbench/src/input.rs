@@ -702,7 +702,7 @@ pub fn read_series(path: &Path, y_column: &str, required: bool) -> Result<Series
         line: Some(lines[k]),
         column: Some((y_col + 1, y_column.to_string())),
         message: format!(
-            "empty cell inside the record: a missing {y_column} sample (the rows around it are uniformly sampled only with it)"
+            "empty cell where a {y_column} sample was due (a reading in fault?): the samples around it are uniformly spaced only with it"
         ),
     }
     };
@@ -718,21 +718,21 @@ pub fn read_series(path: &Path, y_column: &str, required: bool) -> Result<Series
     let t_s = pick(&input.t_s);
     let kept_lines: Vec<u64> = keep.iter().map(|&k| lines[k]).collect();
     let mean_step = check_uniform(path, &t_s, &kept_lines).map_err(|e| {
-        // Where the target is sampled on every row (its rows as close as the file's), a gap
-        // that an empty cell made is named by that cell; where it is sampled on every other
-        // row (the record's flow), the empty cells are its own, and the gap a lost row.
-        let median = |t: &[f64]| {
-            let mut d: Vec<f64> = t.windows(2).map(|p| p[1] - p[0]).collect();
-            d.sort_by(f64::total_cmp);
-            d.get(d.len() / 2).copied().unwrap_or(0.0)
+        // The first step that breaks the rule: if a row of the file stands where the missing
+        // sample was due and its cell is empty, that cell is named (a reading in fault); if
+        // no row stands there, the rule's own message (a lost row).
+        let mut steps: Vec<f64> = t_s.windows(2).map(|p| p[1] - p[0]).collect();
+        steps.sort_by(f64::total_cmp);
+        let med = steps.get(steps.len() / 2).copied().unwrap_or(0.0);
+        let Some(i) =
+            (1..keep.len()).find(|&i| ((t_s[i] - t_s[i - 1]) - med).abs() > MAX_JITTER * med)
+        else {
+            return e;
         };
-        let (all, kept) = (median(&input.t_s), median(&t_s));
-        let every_row = (kept - all).abs() <= MAX_JITTER * all;
-        let (first, last) = (keep[0], keep[keep.len() - 1]);
-        match (first..last).find(|&k| cells[k].is_none()) {
-            Some(k) if every_row => empty_cell(k),
-            _ => e,
-        }
+        let due = t_s[i - 1] + med;
+        (keep[i - 1] + 1..keep[i])
+            .find(|&k| (input.t_s[k] - due).abs() <= MAX_JITTER * med && cells[k].is_none())
+            .map_or(e, empty_cell)
     })?;
     let left_out = cells.len() - keep.len();
     if left_out > 0 {
@@ -935,7 +935,28 @@ mod series_tests {
         let fault = RECORD.replace("0.100,30,1.7,6", "0.100,30,,6");
         let e = read(&fault, "pressure_mca", true).unwrap_err();
         assert!(
-            e.starts_with("F:4:3 (pressure_mca): empty cell inside the record"),
+            e.starts_with("F:4:3 (pressure_mca): empty cell where a pressure_mca sample was due"),
+            "{e}"
+        );
+        // The flow in fault on one of its samples (every other row of 41): named too.
+        let long: String = (0..41)
+            .map(|k| {
+                let q = if k % 2 == 0 && k != 20 { "5" } else { "" };
+                format!("{:.3},10,1.5,{q}\n", f64::from(k) * 0.05)
+            })
+            .fold(
+                "t_s,torque_ref_pct,pressure_mca,flow_lps\n".into(),
+                |s, l| s + &l,
+            );
+        let e = read(&long, "flow_lps", true).unwrap_err();
+        assert!(e.starts_with("F:22:4 (flow_lps): empty cell where"), "{e}");
+        // A row lost before an empty cell further on: the lost row is what is reported.
+        let both = RECORD
+            .replace("0.050,20,1.6,\n", "")
+            .replace("0.250,60,2.0,", "0.250,60,,");
+        let e = read(&both, "pressure_mca", true).unwrap_err();
+        assert!(
+            e.contains("not uniformly sampled") && !e.contains("empty"),
             "{e}"
         );
         // Empty cells at the start or the end only: the rows left are taken.

@@ -229,6 +229,22 @@ fn bad_adaptation_options_are_refused() {
         "output-map",
     ]);
     refused(&r, &["--adapt is for NARMAX models"], "white box");
+    let r = pumpbench(&[
+        "simulate",
+        "--model",
+        "narmax",
+        "--weights",
+        "../models/pressure.json",
+        "--input",
+        &input,
+        "--adapt-tau-s",
+        "5",
+    ]);
+    refused(
+        &r,
+        &["--adapt-tau-s is the output map's"],
+        "a memory without the map",
+    );
     // The shipped pressure model with the map on `input`, and `extra` options.
     let adapted = |input: &str, extra: &[&str]| {
         let mut a = vec![
@@ -261,4 +277,89 @@ fn bad_adaptation_options_are_refused() {
     );
     let r = adapted(&rec, &["--adapt-tau-s", "0.01"]);
     refused(&r, &["--adapt-tau-s 0.01"], "memory too short");
+    let r = adapted(&rec, &["--adapt-tau-s", "61"]);
+    refused(
+        &r,
+        &["--adapt-tau-s 61: must be within 0.1..=60 s"],
+        "memory too long",
+    );
+}
+
+/// A pump under pressure control holds its torque: the samples then show one operating point.
+/// The map must still follow a valve step there (a review: a −50 % pressure at 70 % torque put
+/// the first map into a reset loop, 103 % off), without falling back.
+#[test]
+fn the_output_map_follows_the_valve_at_a_held_torque() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = |name: &str| dir.path().join(name).display().to_string();
+    let [u, id, m, held_csv, val] = ["u.csv", "id.csv", "m.json", "held.csv", "val.csv"].map(p);
+    let bench = ["--curve-error", "5,-3"];
+    run(&[
+        "excite",
+        "--seed",
+        "931",
+        "--seconds",
+        "600",
+        "--ts-ms",
+        "50",
+        "--output",
+        &u,
+    ]);
+    let mut a = vec!["bench-data", "--input", &u, "--seed", "5", "--output", &id];
+    a.extend_from_slice(&bench);
+    run(&a);
+    run(&[
+        "identify", "--data", &id, "--target", "pressure", "--na", "6", "--nb", "6", "--hidden",
+        "7", "--output", &m,
+    ]);
+    let held: String = (0..=2400)
+        .map(|k| format!("{:.2},70\n", f64::from(k) * 0.05))
+        .fold("t_s,torque_ref_pct\n".into(), |s, l| s + &l);
+    std::fs::write(&held_csv, held).unwrap();
+    let mut a = vec![
+        "bench-data",
+        "--input",
+        &held_csv,
+        "--seed",
+        "6",
+        "--truth",
+        "--output",
+        &val,
+        "--valve-steps",
+        "40:0.7,80:1.3",
+    ];
+    a.extend_from_slice(&bench);
+    run(&a);
+    let out = pumpbench(&[
+        "simulate",
+        "--model",
+        "narmax",
+        "--weights",
+        &m,
+        "--input",
+        &val,
+        "--precision",
+        "q15",
+        "--adapt",
+        "output-map",
+    ]);
+    let sim = ok(&out, "simulate");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains(" 0 fallbacks"), "{err}");
+    let truth = std::fs::read_to_string(&val).unwrap();
+    let (sim, truth) = (Table::parse(&sim), Table::parse(&truth));
+    let (t, y, v) = (
+        sim.col("t_s"),
+        sim.col("pressure_mca"),
+        truth.col("pressure_true"),
+    );
+    for (from, to) in [(10.0, 40.0), (50.0, 80.0), (90.0, 120.1)] {
+        let e: Vec<f64> = (0..t.len())
+            .filter(|&k| t[k] >= from && t[k] < to)
+            .map(|k| ((y[k] - v[k]) / v[k]).abs())
+            .collect();
+        let mape = 100.0 * e.iter().sum::<f64>() / e.len() as f64;
+        println!("held torque, {from}..{to} s: {mape:.3} %");
+        assert!(mape <= 1.5, "{from}..{to} s: {mape:.2} %");
+    }
 }
