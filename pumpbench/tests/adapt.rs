@@ -19,6 +19,13 @@ fn run(args: &[&str]) -> String {
     ok(&pumpbench(args), &args.join(" "))
 }
 
+/// The words of `line` (a command line without its paths) followed by `more`.
+fn words<'a>(line: &'a str, more: &[&'a str]) -> Vec<&'a str> {
+    line.split_whitespace()
+        .chain(more.iter().copied())
+        .collect()
+}
+
 /// The per-segment free-run MAPE (%) of `sim`'s `column` against `truth`'s `true_column`,
 /// from 10 s after each step (rows with a true value of 0 left out).
 fn segment_mape(sim: &str, column: &str, truth: &str, true_column: &str) -> Vec<f64> {
@@ -219,50 +226,24 @@ fn bad_adaptation_options_are_refused() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let input = common::write(d, "u.csv", "t_s,torque_ref_pct\n0,10\n0.05,20\n");
-    let r = pumpbench(&[
-        "simulate",
-        "--model",
-        "whitebox",
-        "--input",
-        &input,
-        "--adapt",
-        "output-map",
-    ]);
+    let r = pumpbench(&words(
+        "simulate --model whitebox --adapt output-map --input",
+        &[&input],
+    ));
     refused(&r, &["--adapt is for NARMAX models"], "white box");
-    let r = pumpbench(&[
-        "simulate",
-        "--model",
-        "narmax",
-        "--weights",
-        "../models/pressure.json",
-        "--input",
-        &input,
-        "--adapt-tau-s",
-        "5",
-    ]);
+    // The shipped pressure model on `input`, with `extra` options.
+    let shipped = |input: &str, extra: &str| {
+        let line = "simulate --model narmax --weights ../models/pressure.json";
+        pumpbench(&words(line, &words(extra, &["--input", input])))
+    };
+    let r = shipped(&input, "--adapt-tau-s 5");
     refused(
         &r,
         &["--adapt-tau-s is the output map's"],
         "a memory without the map",
     );
-    // The shipped pressure model with the map on `input`, and `extra` options.
-    let adapted = |input: &str, extra: &[&str]| {
-        let mut a = vec![
-            "simulate",
-            "--model",
-            "narmax",
-            "--weights",
-            "../models/pressure.json",
-            "--input",
-            input,
-            "--adapt",
-            "output-map",
-        ];
-        a.extend_from_slice(extra);
-        pumpbench(&a)
-    };
     refused(
-        &adapted(&input, &[]),
+        &shipped(&input, "--adapt output-map"),
         &["pressure_mca"],
         "no measurement column",
     );
@@ -275,9 +256,9 @@ fn bad_adaptation_options_are_refused() {
                 s + &l
             }),
     );
-    let r = adapted(&rec, &["--adapt-tau-s", "0.01"]);
+    let r = shipped(&rec, "--adapt output-map --adapt-tau-s 0.01");
     refused(&r, &["--adapt-tau-s 0.01"], "memory too short");
-    let r = adapted(&rec, &["--adapt-tau-s", "61"]);
+    let r = shipped(&rec, "--adapt output-map --adapt-tau-s 61");
     refused(
         &r,
         &["--adapt-tau-s 61: must be within 0.1..=60 s"],
@@ -293,56 +274,28 @@ fn the_output_map_follows_the_valve_at_a_held_torque() {
     let dir = tempfile::tempdir().unwrap();
     let p = |name: &str| dir.path().join(name).display().to_string();
     let [u, id, m, held_csv, val] = ["u.csv", "id.csv", "m.json", "held.csv", "val.csv"].map(p);
-    let bench = ["--curve-error", "5,-3"];
-    run(&[
-        "excite",
-        "--seed",
-        "931",
-        "--seconds",
-        "600",
-        "--ts-ms",
-        "50",
-        "--output",
-        &u,
-    ]);
-    let mut a = vec!["bench-data", "--input", &u, "--seed", "5", "--output", &id];
-    a.extend_from_slice(&bench);
-    run(&a);
-    run(&[
-        "identify", "--data", &id, "--target", "pressure", "--na", "6", "--nb", "6", "--hidden",
-        "7", "--output", &m,
-    ]);
+    let bench = "--curve-error 5,-3";
+    run(&words(
+        "excite --seed 931 --seconds 600 --ts-ms 50 --output",
+        &[&u],
+    ));
+    run(&words(
+        &format!("bench-data {bench} --seed 5 --input"),
+        &[&u, "--output", &id],
+    ));
+    let sizes = "--target pressure --na 6 --nb 6 --hidden 7";
+    run(&words(
+        &format!("identify {sizes} --data"),
+        &[&id, "--output", &m],
+    ));
     let held: String = (0..=2400)
         .map(|k| format!("{:.2},70\n", f64::from(k) * 0.05))
         .fold("t_s,torque_ref_pct\n".into(), |s, l| s + &l);
     std::fs::write(&held_csv, held).unwrap();
-    let mut a = vec![
-        "bench-data",
-        "--input",
-        &held_csv,
-        "--seed",
-        "6",
-        "--truth",
-        "--output",
-        &val,
-        "--valve-steps",
-        "40:0.7,80:1.3",
-    ];
-    a.extend_from_slice(&bench);
-    run(&a);
-    let out = pumpbench(&[
-        "simulate",
-        "--model",
-        "narmax",
-        "--weights",
-        &m,
-        "--input",
-        &val,
-        "--precision",
-        "q15",
-        "--adapt",
-        "output-map",
-    ]);
+    let valve = format!("bench-data {bench} --seed 6 --truth --valve-steps 40:0.7,80:1.3 --input");
+    run(&words(&valve, &[&held_csv, "--output", &val]));
+    let line = "simulate --model narmax --precision q15 --adapt output-map --weights";
+    let out = pumpbench(&words(line, &[&m, "--input", &val]));
     let sim = ok(&out, "simulate");
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains(" 0 fallbacks"), "{err}");
