@@ -616,6 +616,30 @@ mod tests {
     use model_core::inverse::{linearise, steady_torque};
     use model_core::{Scheme, WhiteBox};
 
+    /// The paper's bench on its own load, at rest at `pressure_mca`: its parameters, the
+    /// bench, the load, the torque that holds the pressure, the state and its pressure.
+    #[allow(clippy::type_complexity)]
+    fn bench_at(
+        pressure_mca: f32,
+    ) -> (
+        BenchParams<f32>,
+        WhiteBox<f32>,
+        Load<f32>,
+        f32,
+        model_core::BenchState<f32>,
+        f32,
+    ) {
+        let p = BenchParams::<f32>::PAPER;
+        let bench = WhiteBox::new(p).unwrap();
+        let load = paper_load(&p);
+        let u0 = steady_torque(&p, load, Target::PressureMca(pressure_mca))
+            .unwrap()
+            .torque_ref_pct;
+        let st = bench.steady_state(u0).unwrap();
+        let seen = bench.signals(&st).pressure_mca;
+        (p, bench, load, u0, st, seen)
+    }
+
     fn paper_load(p: &BenchParams<f32>) -> Load<f32> {
         Load {
             valve_k2: p.valve_k2,
@@ -743,14 +767,7 @@ mod tests {
     /// by `delay_ms` (and a 20 ms transmitter): the lag after a loop's start far from its
     /// setpoint, after a return from a hold, and after a setpoint step.
     fn lag_through_the_loop(delay_ms: usize) -> [f32; 3] {
-        let p = BenchParams::<f32>::PAPER;
-        let bench = WhiteBox::new(p).unwrap();
-        let load = paper_load(&p);
-        let u0 = steady_torque(&p, load, Target::PressureMca(1.5))
-            .unwrap()
-            .torque_ref_pct;
-        let mut st = bench.steady_state(u0).unwrap();
-        let mut seen = bench.signals(&st).pressure_mca;
+        let (p, bench, load, u0, mut st, mut seen) = bench_at(1.5);
         let mut line = vec![seen; delay_ms + 1];
         let s = ControlSettings::DEFAULT;
         // Started at 1.5 mca with the setpoint at 3: the reference moves, no step was made.
@@ -944,14 +961,7 @@ mod tests {
     /// A closed loop on the white-box (RK4, 1 ms) with a 20 ms pressure transmitter,
     /// pressure steps 2 → 4 → 1 → 3 mca, the feedforward on the true load; the figures.
     fn run(law: ControlLaw) -> Vec<(f32, f32, f32)> {
-        let p = BenchParams::<f32>::PAPER;
-        let bench = WhiteBox::new(p).unwrap();
-        let load = paper_load(&p);
-        let u0 = steady_torque(&p, load, Target::PressureMca(2.0))
-            .unwrap()
-            .torque_ref_pct;
-        let mut st = bench.steady_state(u0).unwrap();
-        let mut seen = bench.signals(&st).pressure_mca;
+        let (p, bench, load, u0, mut st, mut seen) = bench_at(2.0);
         let s = ControlSettings {
             law,
             ..ControlSettings::DEFAULT

@@ -721,9 +721,7 @@ pub fn read_series(path: &Path, y_column: &str, required: bool) -> Result<Series
         // The first step that breaks the rule: if a row of the file stands where the missing
         // sample was due and its cell is empty, that cell is named (a reading in fault); if
         // no row stands there, the rule's own message (a lost row).
-        let mut steps: Vec<f64> = t_s.windows(2).map(|p| p[1] - p[0]).collect();
-        steps.sort_by(f64::total_cmp);
-        let med = steps.get(steps.len() / 2).copied().unwrap_or(0.0);
+        let med = median_step(&t_s);
         let Some(i) =
             (1..keep.len()).find(|&i| ((t_s[i] - t_s[i - 1]) - med).abs() > MAX_JITTER * med)
         else {
@@ -751,6 +749,13 @@ pub fn read_series(path: &Path, y_column: &str, required: bool) -> Result<Series
     })
 }
 
+/// The median of the steps between successive times (0 for fewer than two).
+fn median_step(t_s: &[f64]) -> f64 {
+    let mut steps: Vec<f64> = t_s.windows(2).map(|p| p[1] - p[0]).collect();
+    steps.sort_by(f64::total_cmp);
+    steps.get(steps.len() / 2).copied().unwrap_or(0.0)
+}
+
 /// The rule on a record's times for the commands that read a uniformly sampled record
 /// (`identify`, `validate`, `simulate --model narmax`, `study`, `observe`): every step within
 /// [`MAX_JITTER`] of the median step. `t_s` is strictly increasing, `lines` are the rows'
@@ -759,9 +764,7 @@ pub fn read_series(path: &Path, y_column: &str, required: bool) -> Result<Series
 fn check_uniform(path: &Path, t_s: &[f64], lines: &[u64]) -> Result<f64, InputError> {
     // Gaps are judged against the median step (one gap or extra sample does not move it);
     // the period reported is the mean step, span / (n − 1), equal to it for accepted data.
-    let mut steps: Vec<f64> = t_s.windows(2).map(|p| p[1] - p[0]).collect();
-    steps.sort_by(f64::total_cmp);
-    let ts = steps.get(steps.len() / 2).copied().unwrap_or(0.0);
+    let ts = median_step(t_s);
     let n = t_s.len();
     let mean_step = if n > 1 {
         (t_s[n - 1] - t_s[0]) / (n - 1) as f64

@@ -236,6 +236,15 @@ fn settled<P: Predictor>(m: &P, u: f64) -> Option<f64> {
 /// its first max-lag rows seed the history and are returned as measured; otherwise the history
 /// starts at the model's own steady state for the first torque.
 pub fn free_run<M: Predictor>(m: &M, series: &Series) -> Result<Vec<f64>, Failure> {
+    free_run_with(m, series, |_, y| y)
+}
+
+/// [`free_run`], each row `k`'s free-run output `y` given as `output(k, y)`.
+fn free_run_with<M: Predictor>(
+    m: &M,
+    series: &Series,
+    mut output: impl FnMut(usize, M::Value) -> M::Value,
+) -> Result<Vec<f64>, Failure> {
     let u = &series.torque_ref_pct;
     let v = M::Value::from_f64;
     let mut out = Vec::with_capacity(u.len());
@@ -256,9 +265,9 @@ pub fn free_run<M: Predictor>(m: &M, series: &Series) -> Result<Vec<f64>, Failur
         }
     }
     let mut clamped = 0usize;
-    for &uk in &u[start..] {
+    for (k, &uk) in u.iter().enumerate().skip(start) {
         let o = m.simulate_step(&mut st, v(uk));
-        out.push(o.y.to_f64());
+        out.push(output(k, o.y).to_f64());
         clamped += usize::from(o.clamped);
     }
     if clamped > 0 {
@@ -305,36 +314,21 @@ pub fn free_run_adapted<M: Predictor>(
                 TAU_RANGE_S.1
             ))
         })?;
-    let u = &series.torque_ref_pct;
-    let start = model.lags().max_lag().min(u.len());
-    let mut st = model.state_at(v(u[0]), v(y[0]));
-    let mut out = Vec::with_capacity(u.len());
-    for k in 0..start {
-        model.seed(&mut st, v(u[k]), v(y[k]));
-        out.push(y[k]);
-    }
     let (lo, hi) = span(m.target);
-    let (mut taken, mut resets, mut clamped) = (0usize, 0usize, 0usize);
-    for k in start..u.len() {
-        let o = model.simulate_step(&mut st, v(u[k]));
-        clamped += usize::from(o.clamped);
-        out.push(map.output(o.y).to_f64());
+    let (mut taken, mut resets) = (0usize, 0usize);
+    let out = free_run_with(model, series, |k, network| {
+        let adapted = map.output(network);
         if y[k] > lo && y[k] < hi {
-            let r = map.update(o.y, v(y[k]));
+            let r = map.update(network, v(y[k]));
             taken += usize::from(r.taken);
             resets += usize::from(r.diverged);
         }
-    }
-    if clamped > 0 {
-        eprintln!(
-            "pumpbench: {clamped} of {} free-run samples had regressors outside the training range (clamped)",
-            u.len() - start
-        );
-    }
+        adapted
+    })?;
+    let rows = series.torque_ref_pct.len() - model.lags().max_lag().min(y.len());
     eprintln!(
-        "pumpbench: output map (memory {} s): {taken} of {} rows taken, {resets} fallbacks to the identity",
-        Short(tau_s),
-        u.len() - start
+        "pumpbench: output map (memory {} s): {taken} of {rows} rows taken, {resets} fallbacks to the identity",
+        Short(tau_s)
     );
     Ok(out)
 }
