@@ -32,6 +32,7 @@ for _ in range(2000):
     torque = float(ask(f'S {code(p, 10)} {code(q, 30)} {n:.1f} {torque}')[2])
     for _ in range(5):  # 1 ms steps
         n += 0.001 * 29.0 * (torque - 100.0 * (n / 1760.0) ** 2)
-ask('Q')
+try: ask('Q')  # 'B'; the QEMU board may close its line before it is read
+except OSError: pass
 print(f'pressure {p:.3f} mca after 10 s (setpoint 3 mca)')
 sys.exit(0 if abs(p - 3.0) <= 0.15 else 1)
