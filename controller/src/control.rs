@@ -41,8 +41,9 @@ use crate::vfd::{VfdMap, VfdReadings};
 use model_core::excitation::McuPulses;
 use model_core::inverse::Load;
 use model_core::monitor::{Monitor, MonitorConfig, MonitorInputs};
+use model_core::narmax::adapt::OutputMap;
 use model_core::narmax::mcu::{NarxF32, NarxF32State, NarxQ15, NarxQ15State, MAX_PERIOD_MS};
-use model_core::narmax::{NarmaxError, NarmaxOutput, Predictor};
+use model_core::narmax::{NarmaxError, NarmaxOutput, Predictor, Scaling};
 use model_core::observer::{Measurements, Observer, ObserverConfig, ObserverError};
 use model_core::{BenchError, BenchState, Scheme, Signals, WhiteBox};
 
@@ -114,6 +115,8 @@ pub struct Config {
     pub initial_setpoint_pct: f32,
     /// NARMAX arithmetic at start-up.
     pub initial_arithmetic: Arithmetic,
+    /// The NARMAX models follow the load from start-up (holding register 19 at 1).
+    pub initial_narmax_adapt: bool,
     /// The board has a virtual bench: SCADA holding registers 3 (valve) and 4 (fault
     /// injection) exist and are handed on in [`Outputs::bench`] every step.
     pub virtual_bench: bool,
@@ -124,7 +127,7 @@ pub struct Config {
 impl Config {
     /// The bench's transmitters (pressure 0..10 mca, flow 0..30 l/s: [`PRESSURE_LOOP`],
     /// [`FLOW_LOOP`]), the [`VfdMap::example_16384`] drive, SCADA unit 1, profile seed 1,
-    /// stopped, NARMAX in f32, no virtual bench.
+    /// stopped, NARMAX in f32 and not following the load, no virtual bench.
     pub const fn bench() -> Self {
         Self {
             pressure_loop: PRESSURE_LOOP,
@@ -135,6 +138,7 @@ impl Config {
             initial_mode: Mode::Stop,
             initial_setpoint_pct: 0.0,
             initial_arithmetic: Arithmetic::F32,
+            initial_narmax_adapt: false,
             virtual_bench: false,
             protection: ProtectionConfig::DEFAULT,
         }
@@ -175,7 +179,74 @@ pub struct NarmaxModel<const F: usize, const H: usize> {
     st_q: NarxQ15State<F>,
     period_ms: u32,
     last: f32,
+    follow: Follow,
 }
+
+/// A model following the load: its output map while on, the measurement it takes next, and
+/// its fallback's alarm. Apart from the generic [`NarmaxModel`] and out of line, so that both
+/// models share one copy of its code.
+#[derive(Debug, Clone, Default)]
+struct Follow {
+    /// The map, while following (built when turned on: forgotten when turned off).
+    map: Option<OutputMap<f32>>,
+    /// The last sample's (network output, measurement), for [`Self::settle`].
+    pending: Option<(f32, f32)>,
+    /// Samples left during which the map's last fallback shows as the model-residual alarm.
+    fallback_left: u16,
+}
+
+impl Follow {
+    /// One sample of the network's free-run output `network` (training `scaling`, sampled
+    /// every `period_s`): the adapted output; `in_span` waits for [`Self::settle`]. Turned
+    /// on, the map starts at the identity; turned off, it is forgotten.
+    #[inline(never)]
+    fn sample(
+        &mut self,
+        on: bool,
+        network: f32,
+        in_span: Option<f32>,
+        scaling: Scaling<f32>,
+        period_s: f32,
+    ) -> f32 {
+        self.pending = None;
+        if !on {
+            self.map = None;
+            self.fallback_left = 0;
+            return network;
+        }
+        self.fallback_left = self.fallback_left.saturating_sub(1);
+        if self.map.is_none() {
+            // Refused only for a model whose scaling is not usable (a std not > 0): then it
+            // cannot follow, and says so as a fallback would.
+            self.map = OutputMap::new(scaling, period_s, ADAPT_TAU_S).ok();
+            if self.map.is_none() {
+                self.fallback_left = ADAPT_FALLBACK_SHOWN_SAMPLES;
+                return network;
+            }
+        }
+        self.pending = in_span.map(|m| (network, m));
+        self.map.as_ref().map_or(network, |m| m.output(network))
+    }
+
+    /// The map takes the last sample's measurement, on the tick after it (the sample's tick
+    /// also runs the observer: the update kept out of the longest tick).
+    #[inline(never)]
+    fn settle(&mut self) {
+        if let (Some(map), Some((network, m))) = (&mut self.map, self.pending.take()) {
+            if map.update(network, m).diverged {
+                self.fallback_left = ADAPT_FALLBACK_SHOWN_SAMPLES;
+            }
+        }
+    }
+}
+
+/// The output map's memory, s ([`model_core::narmax::adapt`]): long against the bench's
+/// time constants (0.2..0.7 s), so the map cannot stand in for the network's dynamics; short
+/// against a valve's move being followed (segments of the records settle within it).
+pub const ADAPT_TAU_S: f32 = 2.0;
+
+/// How long a fallback of the output map shows as the model-residual alarm, samples.
+pub const ADAPT_FALLBACK_SHOWN_SAMPLES: u16 = 60;
 
 impl<const F: usize, const H: usize> NarmaxModel<F, H> {
     /// The model sampled every `period_ms` ms (1..=[`MAX_PERIOD_MS`], the firmware's rule for a
@@ -197,7 +268,13 @@ impl<const F: usize, const H: usize> NarmaxModel<F, H> {
             q15,
             period_ms,
             last: y0,
+            follow: Follow::default(),
         })
+    }
+
+    /// The output map's fallback shows (the model-residual alarm).
+    pub fn fallback_shown(&self) -> bool {
+        self.follow.fallback_left > 0
     }
 
     /// Sample period, ms.
@@ -222,6 +299,19 @@ impl<const F: usize, const H: usize> NarmaxModel<F, H> {
         };
         self.last = out.y;
         out
+    }
+
+    /// The sample's output `y` of a free run through the output map while `on`
+    /// ([`Follow::sample`]; `in_span`: the reading, if inside its span, that the map takes on
+    /// the next tick). Off and forgotten, `y` itself.
+    #[inline(always)]
+    fn follow(&mut self, on: bool, y: f32, in_span: Option<f32>) -> f32 {
+        if !on && self.follow.map.is_none() && self.follow.fallback_left == 0 {
+            return y;
+        }
+        let period_s = self.period_ms as f32 * 1e-3;
+        self.follow
+            .sample(on, y, in_span, self.float.output_scaling(), period_s)
     }
 }
 
@@ -299,6 +389,10 @@ pub struct Commands {
     pub setpoint_pct: f32,
     /// NARMAX arithmetic.
     pub arithmetic: Arithmetic,
+    /// The NARMAX models follow the load (holding register 19): each runs free and an affine
+    /// map of its output is fitted to the measurements ([`model_core::narmax::adapt`]);
+    /// `false`: one-step-ahead on the measurements.
+    pub narmax_adapt: bool,
     /// Virtual bench valve, × nominal k2 ([`crate::types::VALVE_FACTOR_RANGE`]).
     pub valve_factor: f32,
     /// Faults injected into the virtual bench.
@@ -364,7 +458,9 @@ pub struct BenchCommands {
     pub faults: InjectedFaults,
 }
 
-/// The outputs of one [`Controller::step`].
+/// The outputs of one [`Controller::step`]. What the SCADA input registers publish is
+/// [`Controller::published`], read after the step: not copied here (the copy was ≈ 64
+/// instructions of every 1 ms step on the M4).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Outputs {
     /// Step time, ms (wraps after 49 days).
@@ -376,8 +472,6 @@ pub struct Outputs {
     pub requested_torque_pct: f32,
     /// The virtual bench's settings; `None` on a board without one.
     pub bench: Option<BenchCommands>,
-    /// What the SCADA input registers publish.
-    pub published: Published,
     /// Once a second, the log line.
     pub log: Option<LogLine>,
 }
@@ -399,6 +493,12 @@ pub struct Controller<const NP: usize, const HP: usize, const NF: usize, const H
     model_fault_ms: u32,
     wb_extrapolating: bool,
     nx_clamped: [bool; 2],
+    /// [`model_core::monitor::MODEL_RESIDUAL`] while a NARMAX output map's fallback shows,
+    /// else 0 (set on the models' samples, added to the alarm bits every step).
+    adapt_alarm: u16,
+    /// A model sampled with its output map on (or its alarm showing): the maps settle on the
+    /// next step.
+    follow_due: bool,
     observer: Observer<f32>,
     monitor: Monitor<f32>,
     /// Applied torque summed since the last observer step, % · ticks, and the ticks.
@@ -463,6 +563,7 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
     Controller<NP, HP, NF, HF>
 {
     /// The controller with the paper's white-box bench and the two NARMAX models, at rest.
+    #[inline(never)]
     pub fn new(
         config: &Config,
         pressure: NarmaxModel<NP, HP>,
@@ -500,6 +601,8 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             model_fault_ms: 0,
             wb_extrapolating: false,
             nx_clamped: [false; 2],
+            adapt_alarm: 0,
+            follow_due: false,
             observer,
             monitor: Monitor::new(MonitorConfig::paper()),
             torque_sum: 0.0,
@@ -640,7 +743,7 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
         }
         let bits = self.monitor.bits();
         // Published as they are now; an observer step later in this step updates them.
-        self.out.alarms = bits;
+        self.out.alarms = bits | self.adapt_alarm;
         self.protection
             .update(&c.protection, dt, bits, c.mode == Mode::Stop, ack)
     }
@@ -867,7 +970,7 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             pressure_sd_mca: e.pressure_sd_mca,
         };
         let o = &mut self.out;
-        o.alarms = self.monitor.bits();
+        o.alarms = self.monitor.bits() | self.adapt_alarm;
         o.observer_speed_rpm = e.speed_rpm;
         o.observer_flow_lps = e.flow_lps;
         o.observer_valve_k2 = e.valve_k2;
@@ -877,6 +980,20 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
     /// One millisecond (see the module docs).
     pub fn step(&mut self, inp: &Inputs) -> Outputs {
         let now = self.t_ms;
+        let adapt = inp.commands.narmax_adapt;
+        if self.follow_due {
+            // The output maps take the last samples' measurements (see `Follow::settle`).
+            self.follow_due = false;
+            self.pressure.follow.settle();
+            self.flow.follow.settle();
+            let shown =
+                self.pressure.follow.fallback_left > 0 || self.flow.follow.fallback_left > 0;
+            self.adapt_alarm = if shown {
+                model_core::monitor::MODEL_RESIDUAL
+            } else {
+                0
+            };
+        }
         let control = self.control_due();
         let take_p = now.is_multiple_of(self.pressure.period_ms);
         let take_q = now.is_multiple_of(self.flow.period_ms);
@@ -923,17 +1040,21 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
                 // value is clamped, a bound rather than a measurement (at rest the outlet
                 // sits below the span's 0).
                 pressure_measured = (r.status == InputStatus::Ok).then_some(r.value);
-                let nx = self
-                    .pressure
-                    .step(self.arithmetic, u, good.then_some(r.value));
+                let nx = self.pressure.step(
+                    self.arithmetic,
+                    u,
+                    good.then_some(r.value).filter(|_| !adapt),
+                );
+                let y = self.pressure.follow(adapt, nx.y, pressure_measured);
+                self.follow_due |= adapt || self.adapt_alarm != 0;
                 self.nx_clamped[0] = nx.clamped;
                 o.pressure_mca = r.value;
-                o.narmax_pressure_mca = nx.y;
+                o.narmax_pressure_mca = y;
                 (
                     o.whitebox_pressure_residual_mca,
                     o.narmax_pressure_residual_mca,
                 ) = if good {
-                    (r.value - wb.pressure_mca, r.value - nx.y)
+                    (r.value - wb.pressure_mca, r.value - y)
                 } else {
                     (0.0, 0.0)
                 };
@@ -944,12 +1065,18 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
                 let r = self.flow_in.sample(inp.flow_code);
                 let good = r.status != InputStatus::Fault;
                 flow_measured = (r.status == InputStatus::Ok).then_some(r.value);
-                let nx = self.flow.step(self.arithmetic, u, good.then_some(r.value));
+                let nx = self.flow.step(
+                    self.arithmetic,
+                    u,
+                    good.then_some(r.value).filter(|_| !adapt),
+                );
+                let y = self.flow.follow(adapt, nx.y, flow_measured);
+                self.follow_due |= adapt || self.adapt_alarm != 0;
                 self.nx_clamped[1] = nx.clamped;
                 o.flow_lps = r.value;
-                o.narmax_flow_lps = nx.y;
+                o.narmax_flow_lps = y;
                 (o.whitebox_flow_residual_lps, o.narmax_flow_residual_lps) = if good {
-                    (r.value - wb.flow_lps, r.value - nx.y)
+                    (r.value - wb.flow_lps, r.value - y)
                 } else {
                     (0.0, 0.0)
                 };
@@ -1023,7 +1150,6 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
                 valve_factor: inp.commands.valve_factor,
                 faults: inp.commands.faults,
             }),
-            published: self.out,
             log: now.is_multiple_of(LOG_EVERY_MS).then_some(LogLine {
                 t_ms: now,
                 mode: inp.commands.mode,
@@ -1052,5 +1178,112 @@ mod tests {
         );
         assert_eq!(s.speed_rpm, good.speed_rpm, "restarted at the steady state");
         assert!(step_or_restart(&wb, &mut s, 50.0), "and steps again");
+    }
+
+    const S: Scaling<f32> = Scaling {
+        mean: 2.0,
+        std: 0.5,
+    };
+    const TS: f32 = 0.05;
+
+    /// A network output that moves (the pulses of a free run), its plant 1.3 times it.
+    fn network(k: u32) -> f32 {
+        2.0 + 0.6 * (k as f32 * 0.3).sin()
+            + if (k / 40).is_multiple_of(2) {
+                0.4
+            } else {
+                -0.3
+            }
+    }
+
+    /// The controller's `Follow` (output now, update on the next tick) gives the bits of the
+    /// output map run as `pumpbench simulate --adapt` runs it (output, then update).
+    #[test]
+    fn following_is_the_output_map_one_tick_later() {
+        let mut f = Follow::default();
+        let mut map = OutputMap::new(S, TS, ADAPT_TAU_S).unwrap();
+        for k in 0..2000 {
+            let y = network(k);
+            let m = (k % 7 != 3).then_some(1.3 * y - 0.4);
+            let out = f.sample(true, y, m, S, TS);
+            assert_eq!(out.to_bits(), map.output(y).to_bits(), "sample {k}");
+            if let Some(m) = m {
+                map.update(y, m);
+            }
+            f.settle();
+        }
+        let (a, b) = map.gain_offset();
+        assert!((a - 1.3).abs() < 0.05 && b.abs() < 0.5, "learnt ({a}, {b})");
+    }
+
+    /// Turned off, the map is forgotten: turned on again, it starts at the identity.
+    #[test]
+    fn turning_it_off_forgets_the_map() {
+        let mut f = Follow::default();
+        for k in 0..400 {
+            f.sample(true, network(k), Some(1.3 * network(k)), S, TS);
+            f.settle();
+        }
+        assert_ne!(f.sample(true, 2.5, None, S, TS), 2.5, "a map learnt");
+        assert_eq!(f.sample(false, 2.5, Some(4.0), S, TS), 2.5);
+        f.settle();
+        assert!(f.map.is_none());
+        assert_eq!(f.sample(true, 2.5, None, S, TS), 2.5, "the identity");
+    }
+
+    /// A map that does worse than none (learnt at one valve, the plant back at the model)
+    /// returns to the identity, and the fallback shows as the model-residual alarm.
+    #[test]
+    fn a_map_worse_than_none_falls_back_and_raises_the_alarm() {
+        let mut f = Follow::default();
+        let mut k = 0;
+        for _ in 0..400 {
+            f.sample(true, network(k), Some(network(k) + 1.0), S, TS);
+            f.settle();
+            k += 1;
+        }
+        assert_eq!(f.fallback_left, 0);
+        let mut fell = None;
+        for n in 0..200 {
+            f.sample(true, network(k), Some(network(k)), S, TS);
+            f.settle();
+            k += 1;
+            if f.fallback_left > 0 {
+                fell = Some(n);
+                break;
+            }
+        }
+        let n = fell.expect("the map fell back");
+        assert!(n < 20, "after {n} samples");
+        assert_eq!(
+            f.sample(true, 3.0, None, S, TS),
+            3.0,
+            "back at the identity"
+        );
+        assert_eq!(f.fallback_left, ADAPT_FALLBACK_SHOWN_SAMPLES - 1);
+    }
+
+    proptest::proptest! {
+        /// Whatever the network and the readings (NaN, ±∞, huge), the output is finite
+        /// whenever the network's is, the gain stays in its range and the update never
+        /// leaves a non-finite map.
+        #[test]
+        fn following_never_makes_a_non_finite_output(
+            seq in proptest::collection::vec(
+                (proptest::num::f32::ANY, proptest::option::of(proptest::num::f32::ANY)),
+                1..400,
+            )
+        ) {
+            let mut f = Follow::default();
+            for (y, m) in seq {
+                let out = f.sample(true, y, m, S, TS);
+                proptest::prop_assert!(!y.is_finite() || out.is_finite(), "{} -> {}", y, out);
+                f.settle();
+                if let Some(map) = &f.map {
+                    let (a, b) = map.gain_offset();
+                    proptest::prop_assert!(a.is_finite() && b.is_finite());
+                }
+            }
+        }
     }
 }

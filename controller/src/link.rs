@@ -25,7 +25,7 @@ pub struct ScadaLink {
 
 impl ScadaLink {
     /// The server at `config.scada_unit`, holding the start-up mode, setpoint (rounded to the
-    /// register's 0.01 %; refused outside 0..=100 %) and arithmetic; with holding registers 3
+    /// register's 0.01 %; refused outside 0..=100 %), arithmetic and adaptation; with holding registers 3
     /// and 4 if `config.virtual_bench`.
     pub fn new(config: &Config) -> Result<Self, Error> {
         let mut slave = ScadaSlave::new(config.scada_unit).ok_or(Error::Config("SCADA unit"))?;
@@ -33,6 +33,7 @@ impl ScadaLink {
             .ok_or(Error::Config("initial setpoint outside 0..=100 %"))?;
         slave.mode = config.initial_mode;
         slave.arithmetic = config.initial_arithmetic;
+        slave.narmax_adapt = config.initial_narmax_adapt;
         if !config.protection.is_valid() {
             return Err(Error::Config("protection settings out of range"));
         }

@@ -98,6 +98,7 @@ use crate::link::ScadaLink;
 use crate::modbus::Exception;
 use crate::regulate::CONTROL_PERIOD_MS;
 use crate::scada::ScadaSlave;
+use crate::types::Published;
 use crate::vfd::VfdReadings;
 
 /// One frame per this many 1 ms steps: the control period.
@@ -171,12 +172,12 @@ impl Lockstep {
     }
 
     /// One period: [`FRAME_PERIOD_MS`] steps of `controller` on `frame`; `each` sees every
-    /// step's outputs (a CSV row, the log); returns the reply.
+    /// step's outputs and what it published (a CSV row, the log); returns the reply.
     pub fn period<const NP: usize, const HP: usize, const NF: usize, const HF: usize>(
         &mut self,
         controller: &mut Controller<NP, HP, NF, HF>,
         frame: &PlantFrame,
-        mut each: impl FnMut(&Outputs),
+        mut each: impl FnMut(&Outputs, &Published),
     ) -> PlantReply {
         self.vfd.link_alarm = frame.drive.is_none();
         self.vfd.readings = frame.drive;
@@ -197,9 +198,9 @@ impl Lockstep {
             let out = controller.step(&inputs);
             reply = PlantReply {
                 torque_ref_pct: out.torque_ref_pct,
-                status: out.published.status,
+                status: controller.published().status,
             };
-            each(&out);
+            each(&out, controller.published());
         }
         reply
     }
@@ -544,7 +545,7 @@ pub fn serve_line<const NP: usize, const HP: usize, const NF: usize, const HF: u
     controller: &mut Controller<NP, HP, NF, HF>,
     line: &[u8],
     out: &mut impl core::fmt::Write,
-    each: impl FnMut(&Outputs),
+    each: impl FnMut(&Outputs, &Published),
 ) -> Result<Served, core::fmt::Error> {
     let (reply, served) = match Request::parse(line) {
         Ok(request) => answer(lockstep, controller, request, each),
@@ -559,7 +560,7 @@ fn answer<const NP: usize, const HP: usize, const NF: usize, const HF: usize>(
     lockstep: &mut Lockstep,
     controller: &mut Controller<NP, HP, NF, HF>,
     request: Request,
-    mut each: impl FnMut(&Outputs),
+    mut each: impl FnMut(&Outputs, &Published),
 ) -> (Reply, Served) {
     let reply = match request {
         Request::Hello { version } if version == PROTOCOL_VERSION => Reply::Hello {
@@ -569,9 +570,9 @@ fn answer<const NP: usize, const HP: usize, const NF: usize, const HF: usize>(
         Request::Hello { .. } => Reply::Error(LineError::Version),
         Request::Frame(frame) => {
             let mut t_ms = controller.now_ms();
-            let reply = lockstep.period(controller, &frame, |o| {
+            let reply = lockstep.period(controller, &frame, |o, p| {
                 t_ms = o.t_ms;
-                each(o)
+                each(o, p)
             });
             Reply::Torque { t_ms, reply }
         }
@@ -634,7 +635,7 @@ impl PlantSession {
         byte: u8,
         controller: &mut Controller<NP, HP, NF, HF>,
         out: &mut impl core::fmt::Write,
-        each: impl FnMut(&Outputs),
+        each: impl FnMut(&Outputs, &Published),
     ) -> Result<Served, core::fmt::Error> {
         if self.ended {
             return Ok(Served::Quit);
@@ -691,7 +692,7 @@ mod tests {
     fn feed(s: &mut PlantSession, c: &mut Ctl, input: &[u8]) -> String {
         let mut out = String::new();
         for &b in input {
-            s.feed(b, c, &mut out, |_| {}).unwrap();
+            s.feed(b, c, &mut out, |_, _| {}).unwrap();
         }
         out
     }
@@ -991,7 +992,7 @@ mod tests {
                     status: 0,
                 }),
             };
-            let r = l2.period(&mut c2, &frame, |_| {});
+            let r = l2.period(&mut c2, &frame, |_, _| {});
             let text = std::format!(
                 "{}",
                 Reply::Torque {

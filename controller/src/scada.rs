@@ -57,6 +57,7 @@
 //! | 16 | flow transmitter's time constant and the lags the loop does not model, ms (default 250) | 0..=10000 |
 //! | 17 | pressure loop's closed-loop time constant (IMC λ), ms (default 200): longer is calmer, for plants with a water column or a slow drive | 60..=10000 |
 //! | 18 | flow loop's closed-loop time constant, ms (default 300) | 60..=10000 |
+//! | 19 | NARMAX models following the load: 0 off (one-step-ahead on the measurements, default), 1 on (each model runs free and an affine map of its output is fitted to the measurements, [`model_core::narmax::adapt`]); writing 0 forgets the maps | 0..=1 |
 //!
 //! Holding registers 3 and 4 exist only with a virtual bench ([`ScadaSlave::with_virtual_bench`]):
 //! on a board without one they answer exception 02 like any address outside the map, and so
@@ -82,8 +83,8 @@ use crate::types::{
 
 /// Input registers.
 pub const INPUT_REGISTERS: usize = 30;
-/// Holding registers (0..=18; 3 and 4 only with a virtual bench).
-pub const HOLDING_REGISTERS: usize = 19;
+/// Holding registers (0..=19; 3 and 4 only with a virtual bench).
+pub const HOLDING_REGISTERS: usize = 20;
 /// Largest setpoint filter and transmitter time constant (holding registers 13, 15, 16), ms.
 pub const SETPOINT_FILTER_MAX_MS: u16 = 10_000;
 /// Holding registers 17 and 18: the closed-loop time constants accepted, ms. Below 60 ms
@@ -401,6 +402,8 @@ pub struct ScadaSlave {
     pub mode: Mode,
     /// NARMAX arithmetic.
     pub arithmetic: Arithmetic,
+    /// The NARMAX models follow the load (holding register 19).
+    pub narmax_adapt: bool,
     /// Holding registers 3 and 4 exist (a virtual bench).
     virtual_bench: bool,
     /// Virtual bench valve, 0.1 % of nominal k2 (500..=2000).
@@ -423,6 +426,7 @@ impl ScadaSlave {
             setpoint: 0,
             mode: Mode::Stop,
             arithmetic: Arithmetic::F32,
+            narmax_adapt: false,
             virtual_bench: false,
             valve_permille: VALVE_NOMINAL_PERMILLE,
             faults: 0,
@@ -460,6 +464,7 @@ impl ScadaSlave {
             self.control.flow_lag_ms,
             self.control.pressure_closed_loop_ms,
             self.control.flow_closed_loop_ms,
+            u16::from(self.narmax_adapt),
         ]
     }
 
@@ -469,6 +474,7 @@ impl ScadaSlave {
             mode: self.mode,
             setpoint_pct: setpoint_pct(self.setpoint),
             arithmetic: self.arithmetic,
+            narmax_adapt: self.narmax_adapt,
             valve_factor: valve_factor(self.valve_permille),
             faults: injected_faults(self.faults),
             stop_writes: self.stop_writes,
@@ -545,6 +551,7 @@ impl ScadaSlave {
                 16 if v <= SETPOINT_FILTER_MAX_MS => next.control.flow_lag_ms = v,
                 17 if CLOSED_LOOP_RANGE_MS.contains(&v) => next.control.pressure_closed_loop_ms = v,
                 18 if CLOSED_LOOP_RANGE_MS.contains(&v) => next.control.flow_closed_loop_ms = v,
+                19 if v <= 1 => next.narmax_adapt = v == 1,
                 _ => return Err(Exception::IllegalDataValue),
             }
         }
@@ -932,6 +939,27 @@ mod tests {
         }
         assert_eq!(ask(&mut s, &good).unwrap(), good);
         assert_eq!(s.setpoint, 7);
+    }
+
+    /// Holding register 19: the NARMAX models following the load, off by default, 0..=1.
+    #[test]
+    fn register_19_switches_the_models_following_the_load() {
+        let mut s = ScadaSlave::new(1).unwrap();
+        assert!(!s.commands().narmax_adapt);
+        assert_eq!(s.holding()[19], 0);
+        ask(&mut s, &frame(&[1, 6, 0, 19, 0, 1])).unwrap();
+        assert!(s.commands().narmax_adapt);
+        let r = ask(&mut s, &frame(&[1, 3, 0, 19, 0, 1])).unwrap();
+        assert_eq!(&r[..5], &[1, 3, 2, 0, 1]);
+        assert_eq!(exception(&mut s, &[1, 6, 0, 19, 0, 2]), 3, "adaptation 2");
+        assert!(s.commands().narmax_adapt, "a refused write changes nothing");
+        ask(&mut s, &frame(&[1, 6, 0, 19, 0, 0])).unwrap();
+        assert!(!s.commands().narmax_adapt);
+        assert_eq!(
+            exception(&mut s, &[1, 3, 0, 19, 0, 2]),
+            2,
+            "nothing after 19"
+        );
     }
 
     /// The holding registers ↔ the core's types: every valid register value round trips, and

@@ -112,6 +112,7 @@ pub struct VirtualBench {
 
 impl VirtualBench {
     /// A bench at rest (its steady state at 0 % torque).
+    #[inline(never)]
     pub fn new(config: VirtualBenchConfig) -> Result<Self, BenchError> {
         let mut p = BenchParams::<f32>::paper();
         p.inertia_kg_m2 *= config.inertia_factor;
@@ -422,7 +423,7 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
         );
         let out = step(&mut self.controller, &inputs);
         Self::after_step(&mut self.io, &out)?;
-        self.scada.publish(&out.published);
+        self.scada.publish(self.controller.published());
         self.vfd
             .poll(out.t_ms, out.requested_torque_pct, &mut self.io);
         Ok(out)

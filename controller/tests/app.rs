@@ -221,7 +221,7 @@ fn run_faulty(b: &mut Board, drop_function: Option<u8>, ms: u32) {
     for _ in 0..ms {
         let inputs = Board::inputs(&b.controller, &mut b.io, b.scada.commands(), b.vfd.status());
         let out = Board::control(&mut b.controller, &mut b.io, &inputs).unwrap();
-        b.scada.publish(&out.published);
+        b.scada.publish(b.controller.published());
         let mut port = OneKindFails {
             io: &mut b.io,
             drop_function,
@@ -703,12 +703,13 @@ fn no_trip_in_30_minutes_of_pulses() {
         run(&mut b, 1000);
         for s in 1..1800 {
             for _ in 0..1000 {
-                let out = b.tick().unwrap();
-                let st = Status::from_bits(out.published.status);
+                b.tick().unwrap();
+                let p = b.controller.published();
+                let st = Status::from_bits(p.status);
                 assert!(
-                    !st.tripped && out.published.alarms & !model_core::monitor::LOAD_CHANGED == 0,
+                    !st.tripped && p.alarms & !model_core::monitor::LOAD_CHANGED == 0,
                     "{s} s: alarms {:#x}",
-                    out.published.alarms
+                    p.alarms
                 );
             }
             top = top.max(b.io.bench.signals().speed_rpm);
@@ -771,7 +772,7 @@ mod protection_properties {
                             if trip_on & controller::protect::TRIP_OVERSPEED != 0 {
                                 mask |= OVERSPEED;
                             }
-                            let p = &out.published;
+                            let p = b.controller.published();
                             prop_assert!(out.torque_ref_pct.is_finite()
                                 && (0.0..=100.0).contains(&out.torque_ref_pct));
                             if Status::from_bits(p.status).tripped {

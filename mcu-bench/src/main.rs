@@ -17,7 +17,7 @@
 #![no_std]
 #![no_main]
 
-use controller::control::{Config, NarmaxModel};
+use controller::control::{Config, NarmaxModel, ADAPT_TAU_S};
 use controller::modbus::{crc16, Frame};
 use controller::types::Mode;
 use controller::virtual_bench::{VirtualBenchConfig, VirtualBoard};
@@ -30,6 +30,7 @@ use mcu_bench::{empty, inputs, models, plain_model, start_counter, Cost};
 use model_core::dsp::{smlad, smlad_portable};
 use model_core::excitation::SplitMix64;
 use model_core::monitor::{Monitor, MonitorConfig, MonitorInputs};
+use model_core::narmax::adapt::OutputMap;
 use model_core::narmax::mcu::build_period_ms;
 use model_core::narmax::mcu::{tanh_f32, tanh_q15, I16F16};
 use model_core::narmax::{Narmax, Predictor};
@@ -89,6 +90,9 @@ const ROWS: &[Row] = &[
     Row::new("narmax_flow_f32_plain", 400, flow_plain),
     Row::new("narmax_flow_f32", 400, flow_f32).vs("narmax_flow_f32_plain"),
     Row::new("narmax_flow_fixed", 400, flow_fixed).vs("narmax_flow_f32_plain"),
+    // The output map that makes a model follow the load (holding register 19): its output and
+    // its update, once per sample, beside the pressure model's f32 free run.
+    Row::new("narmax_adapt", 400, narmax_adapt),
     // tanh on inputs uniform in [-4, 4).
     Row::new("tanhf", 1000, tanhf),
     Row::new("tanh_f32", 1000, tanh_f32_row).vs("tanhf"),
@@ -112,6 +116,9 @@ const ROWS: &[Row] = &[
     // The whole tick in mode 3 on the virtual bench, the same steps, 20 s: held to the
     // tick's budgets (tick_mean, tick_max).
     Row::new("tick_pressure_mean", 20_000, tick_pressure).with_max("tick_pressure_max"),
+    // The whole tick in profile mode with the models following the load (holding register
+    // 19 = 1), 20 s: held to the tick's budgets.
+    Row::new("tick_adapt_mean", 20_000, tick_adapt).with_max("tick_adapt_max"),
 ];
 
 /// Seed of the excitation every row follows.
@@ -162,6 +169,27 @@ fn narmax_plain<const N: usize, const H: usize>(
         let follows = (y - y_ref).abs() <= 1e-3 * m.output_scaling().std; // false for NaN
         if !follows {
             return Err("the plain pass does not follow model-core's f32 step");
+        }
+    }
+    Ok(())
+}
+
+/// The output map beside the pressure model's f32 free run: the plant's pressure 1.3 times the
+/// model's and 0.2 mca over it, each sample's map output and update timed.
+fn narmax_adapt(c: &mut Cost, n: u32) -> Result<(), Error> {
+    let m = &models::pressure::F32;
+    let mut map = OutputMap::new(m.output_scaling(), NARMAX_MS as f32 * 1e-3, ADAPT_TAU_S)
+        .map_err(|_| "output map refused")?;
+    let mut st = m.state_at(0.0, m.output_mean());
+    for u in inputs::pulses(SEED, NARMAX_MS).take(n as usize) {
+        let y = m.simulate_step(&mut st, u).y;
+        let plant = 1.3 * y + 0.2;
+        let (out, upd) = c.time(|| {
+            let out = map.output(black_box(y));
+            (out, map.update(black_box(y), black_box(plant)))
+        });
+        if !out.is_finite() || upd.diverged {
+            return Err("the output map failed");
         }
     }
     Ok(())
@@ -348,13 +376,18 @@ const FLOW_MS: u32 = build_period_ms(models::flow::SAMPLE_PERIOD_S);
 /// firmware runs it. The inputs (ADC codes, commands, VFD status) are made outside the timed
 /// call, and the links and the bench's 1 ms step run between calls, untimed.
 fn tick(c: &mut Cost, n: u32) -> Result<(), Error> {
-    tick_in(Mode::Profile, c, n)
+    tick_in(Mode::Profile, false, c, n)
+}
+
+/// [`tick`] with the NARMAX models following the load (holding register 19 = 1).
+fn tick_adapt(c: &mut Cost, n: u32) -> Result<(), Error> {
+    tick_in(Mode::Profile, true, c, n)
 }
 
 /// [`tick`] in mode 3 (pressure control), the setpoint stepping 2 → 4 → 1 → 3 mca every 5 s
 /// (the SCADA's holding register, as a user writes it).
 fn tick_pressure(c: &mut Cost, n: u32) -> Result<(), Error> {
-    tick_in(Mode::Pressure, c, n)
+    tick_in(Mode::Pressure, false, c, n)
 }
 
 /// Pressure setpoints of the loop rows, mca, each for [`LOOP_STEP_MS`].
@@ -410,7 +443,7 @@ fn regulator_step(c: &mut Cost, n: u32) -> Result<(), Error> {
     Ok(())
 }
 
-fn tick_in(mode: Mode, c: &mut Cost, n: u32) -> Result<(), Error> {
+fn tick_in(mode: Mode, adapt: bool, c: &mut Cost, n: u32) -> Result<(), Error> {
     let config = Config {
         initial_mode: mode,
         profile_seed: SEED,
@@ -423,6 +456,14 @@ fn tick_in(mode: Mode, c: &mut Cost, n: u32) -> Result<(), Error> {
         .map_err(|_| "flow model")?;
     let mut b = VirtualBoard::new(&config, p, q, VirtualBenchConfig::default_offsets(SEED))
         .map_err(|_| "controller refused its configuration")?;
+    if adapt {
+        // FC 06 to holding register 19, as a SCADA writes it.
+        let body = [1, 6, 0, 19, 0, 1];
+        let [c0, c1] = crc16(&body).to_le_bytes();
+        b.scada
+            .handle(&[1, 6, 0, 19, 0, 1, c0, c1], &mut Frame::new())
+            .ok_or("adaptation refused")?;
+    }
     for k in 0..n {
         if k % LOOP_STEP_MS == 0 {
             let sp = LOOP_SETPOINTS_MCA[((k / LOOP_STEP_MS) % 4) as usize];

@@ -692,8 +692,7 @@ pub fn run(
         };
         let mut last: Option<Outputs> = None;
         let (mut nan, mut outside) = (0u64, 0u64);
-        let reply = lock.period(&mut c, &frame, |o| {
-            let p = &o.published;
+        let reply = lock.period(&mut c, &frame, |o, p| {
             if ![
                 o.torque_ref_pct,
                 p.active_setpoint,
@@ -712,7 +711,7 @@ pub fn run(
         });
         trace.nan_steps += nan;
         trace.out_of_limits += outside;
-        let out = last.ok_or_else(|| Failure {
+        last.ok_or_else(|| Failure {
             code: 1,
             message: "a period without a controller step".into(),
         })?;
@@ -731,7 +730,7 @@ pub fn run(
             row,
             mode,
             truth,
-            published: out.published,
+            published: *c.published(),
             torque_ref_pct: reply.torque_ref_pct,
         });
         progress();
@@ -1355,7 +1354,7 @@ pub fn command(a: ControlArgs) -> Result<(), Failure> {
         let served = board_common::serve_plant(
             std::io::stdin().lock(),
             &mut std::io::stdout().lock(),
-            |_| steps += 1,
+            |_, _| steps += 1,
         );
         eprintln!(
             "pumpbench control --plant-stdio: {steps} controller steps ({:.3} s of plant time)",

@@ -60,7 +60,7 @@ pub fn plant_stdio() -> Result {
     board_common::serve_plant(
         std::io::stdin().lock(),
         &mut std::io::stdout().lock(),
-        |_| {},
+        |_, _| {},
     )
 }
 
@@ -99,7 +99,7 @@ impl Endpoint for HostEndpoint {
         let mut reply = String::new();
         for &b in request.as_bytes().iter().chain(b"\n") {
             self.session
-                .feed(b, &mut self.core, &mut reply, |_| {})
+                .feed(b, &mut self.core, &mut reply, |_, _| {})
                 .map_err(|_| "reply not written")?;
         }
         reply

@@ -94,6 +94,8 @@ pub fn host_replay(header: &str, run_ms: u32) -> Result<(Vec<String>, Vec<String
         initial_setpoint_pct: controller::scada::setpoint_pct(num(header, "setpoint")?),
         profile_seed: seed,
         initial_arithmetic: arithmetic,
+        // `adapt=true` may be followed by the header's ", runs until stopped".
+        initial_narmax_adapt: field(header, "adapt")?.trim_end_matches(',') == "true",
         virtual_bench: true,
         ..Config::bench()
     };
@@ -120,8 +122,7 @@ pub fn host_replay(header: &str, run_ms: u32) -> Result<(Vec<String>, Vec<String
         load_torque_factor: per_mille("torque")?,
         ..VirtualBenchConfig::default_offsets(seed)
     };
-    // `record=true` may be followed by the header's ", runs until stopped".
-    let record = field(header, "record")?.trim_end_matches(',') == "true";
+    let record = field(header, "record")? == "true";
     let mut board = VirtualBoard::new(&config, p, q, bench).map_err(e)?;
     let (pp, fp) = board.controller.sample_periods_ms();
     let (mut lines, mut rows) = (vec![], vec![]);
@@ -130,7 +131,8 @@ pub fn host_replay(header: &str, run_ms: u32) -> Result<(Vec<String>, Vec<String
         if let Some(log) = out.log {
             lines.push(log_text(&log));
         }
-        if let Some(row) = RecordRow::at_step(out.t_ms, &out.published, pp, fp).filter(|_| record) {
+        let published = board.controller.published();
+        if let Some(row) = RecordRow::at_step(out.t_ms, published, pp, fp).filter(|_| record) {
             rows.push(record_text(&row));
         }
     }
@@ -232,8 +234,9 @@ fn compare_lines(output: &str, host: &[String]) -> Result<usize> {
 pub fn replay(elf: &Path) -> Result {
     eprintln!("==> QEMU runs against the host replay (netduinoplus2, -icount shift=0,sleep=off)");
     const RUN_MS: u32 = 20_000;
-    // The Q15 run on a bench with other curves, the commissioning record on.
-    for (narmax, extra) in [("f32", ""), ("q15", " head=950 torque=1070 record")] {
+    // The Q15 run on a bench with other curves, the commissioning record on, the models
+    // following the load (holding register 19).
+    for (narmax, extra) in [("f32", ""), ("q15", " head=950 torque=1070 record adapt")] {
         let mut args = vec![
             "mode=2".to_string(),
             format!("narmax={narmax}"),
@@ -259,7 +262,7 @@ mod tests {
     use super::*;
 
     const HEADER: &str =
-        "firmware: virtual bench, SCADA unit 1 on USART1, VFD virtual, mode=2 setpoint=0 seed=1 narmax=f32 head=1000 torque=1020 record=false";
+        "firmware: virtual bench, SCADA unit 1 on USART1, VFD virtual, mode=2 setpoint=0 seed=1 narmax=f32 head=1000 torque=1020 record=false adapt=false";
 
     /// A log as the firmware writes it: the header, the lines, margins between, `done`.
     fn log(header: &str, lines: &[String]) -> String {
@@ -322,6 +325,30 @@ mod tests {
         assert!(host_replay(&HEADER.replace("narmax=f32", "narmax=f16"), 10).is_err());
         assert!(host_replay(&HEADER.replace("seed=1", "seed=x"), 10).is_err());
         assert!(host_replay(&HEADER.replace(" head=1000", ""), 10).is_err());
+        assert!(host_replay(&HEADER.replace(" adapt=false", ""), 10).is_err());
+    }
+
+    /// `adapt=true`: the models follow the load, and their free run with its map is what the
+    /// log lines show.
+    #[test]
+    fn the_header_switches_the_models_following_the_load() {
+        let plain = host_replay(HEADER, 5000).unwrap().0;
+        let header = HEADER.replace("adapt=false", "adapt=true");
+        let adapted = host_replay(&header, 5000).unwrap().0;
+        let nx = |l: &str| {
+            l.split(' ')
+                .find(|w| w.starts_with("nx_p="))
+                .unwrap()
+                .to_string()
+        };
+        assert_eq!(nx(&plain[0]), nx(&adapted[0]), "the same start");
+        assert_ne!(nx(&plain[5]), nx(&adapted[5]), "a free run through its map");
+        assert_eq!(
+            host_replay(&format!("{header}, runs until stopped"), 5000)
+                .unwrap()
+                .0,
+            adapted
+        );
     }
 
     #[test]

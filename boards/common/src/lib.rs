@@ -141,13 +141,13 @@ pub fn plant_session() -> Result<(Controller, controller::plant::PlantSession), 
 /// Serves the plant protocol ([`controller::plant`]) on a byte stream: every byte of `input`
 /// fed to a fresh [`plant_session`], each reply written to `output` and flushed at once (the
 /// plant waits for it), until `Q` or the end of the input; `each` sees every controller step's
-/// outputs. What `cargo xtask plant-stdio` and `pumpbench control --plant-stdio` run on their
+/// outputs and published values. What `cargo xtask plant-stdio` and `pumpbench control --plant-stdio` run on their
 /// standard input and output (feature `std`).
 #[cfg(feature = "std")]
 pub fn serve_plant(
     input: impl std::io::BufRead,
     output: &mut impl std::io::Write,
-    mut each: impl FnMut(&controller::control::Outputs),
+    mut each: impl FnMut(&controller::control::Outputs, &controller::types::Published),
 ) -> Result<(), std::string::String> {
     let (mut core, mut session) =
         plant_session().map_err(|e| std::format!("plant session: {e}"))?;
@@ -413,7 +413,7 @@ mod tests {
         let (mut core, mut session) = plant_session().unwrap();
         let mut out = std::string::String::new();
         for &b in b"H 1\nW 1 1\nS 745 745 0 0\n" {
-            session.feed(b, &mut core, &mut out, |_| {}).unwrap();
+            session.feed(b, &mut core, &mut out, |_, _| {}).unwrap();
         }
         let lines: std::vec::Vec<&str> = out.lines().collect();
         assert_eq!(lines[..2], ["H 1 5", "K"]);

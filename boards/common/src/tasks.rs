@@ -125,16 +125,23 @@ impl StepLinks {
 }
 
 impl StepLinks {
-    /// What a control step leaves behind, in this order: `out`'s published values to
-    /// `publish` (the board's shared resource), the VFD master's request (latest only: when
+    /// What a control step leaves behind, in this order: its `published` values
+    /// ([`controller::control::Controller::published`]) to `publish` (the board's shared
+    /// resource), the VFD master's request (latest only: when
     /// several late steps run at once, the master's next pass takes the last one's request
     /// and time), the SCADA server woken (its answers read the values just published), the
     /// step counted in [`Margin::steps`], and the once-a-second line queued for the log task
     /// (dropped with a warning if the log task is [`LOG_CAP`] lines behind); with the record
     /// on, the step's row (dropped likewise: its number shows the gap).
     #[inline]
-    pub fn after_step(&mut self, out: &Outputs, margin: &Margin, publish: impl FnOnce(&Published)) {
-        publish(&out.published);
+    pub fn after_step(
+        &mut self,
+        out: &Outputs,
+        published: &Published,
+        margin: &Margin,
+        publish: impl FnOnce(&Published),
+    ) {
+        publish(published);
         self.vfd.write(VfdRequest {
             t_ms: out.t_ms,
             torque_pct: out.requested_torque_pct,
@@ -148,7 +155,7 @@ impl StepLinks {
             }
         }
         if let Some((p, q)) = self.record {
-            if let Some(row) = RecordRow::at_step(out.t_ms, &out.published, p, q) {
+            if let Some(row) = RecordRow::at_step(out.t_ms, published, p, q) {
                 if self.log.try_send(LogMsg::Record(row)).is_err() {
                     #[cfg(feature = "defmt")]
                     defmt::warn!("record row {=u32} dropped (log task behind)", row.seq);
@@ -317,22 +324,25 @@ mod tests {
         }
     }
 
-    fn outputs(t_ms: u32, log: bool) -> Outputs {
-        let published = Published {
+    /// What a controller publishes at `t_ms`.
+    fn values(t_ms: u32) -> Published {
+        Published {
             torque_pct: t_ms as f32 / 10.0,
             ..Published::default()
-        };
+        }
+    }
+
+    fn outputs(t_ms: u32, log: bool) -> Outputs {
         Outputs {
             t_ms,
             torque_ref_pct: 12.5,
             requested_torque_pct: t_ms as f32 / 100.0,
             bench: None,
-            published,
             log: log.then_some(LogLine {
                 t_ms,
                 mode: Mode::Manual,
                 arithmetic: Arithmetic::F32,
-                values: published,
+                values: values(t_ms),
             }),
         }
     }
@@ -343,8 +353,9 @@ mod tests {
         let margin = Margin::new();
         let mut published = Published::default();
         let out = outputs(7, true);
-        l.step.after_step(&out, &margin, |p| published = *p);
-        assert_eq!(published, out.published);
+        l.step
+            .after_step(&out, &values(7), &margin, |p| published = *p);
+        assert_eq!(published, values(7));
         assert_eq!(
             l.vfd_wait.try_read(),
             Some(VfdRequest {
@@ -367,7 +378,8 @@ mod tests {
         let mut l = links();
         let margin = Margin::new();
         for t in 1..=5 {
-            l.step.after_step(&outputs(t, false), &margin, |_| {});
+            l.step
+                .after_step(&outputs(t, false), &values(t), &margin, |_| {});
         }
         assert_eq!(margin.snapshot().steps, 5);
         assert_eq!(l.vfd_wait.try_read().map(|r| r.t_ms), Some(5));
@@ -386,7 +398,8 @@ mod tests {
         let margin = Margin::new();
         let n = LOG_CAP as u32 + 3;
         for t in 0..n {
-            l.step.after_step(&outputs(t, true), &margin, |_| {});
+            l.step
+                .after_step(&outputs(t, true), &values(t), &margin, |_| {});
         }
         assert_eq!(margin.snapshot().steps, n);
         for t in 0..LOG_CAP as u32 {
@@ -470,7 +483,8 @@ mod tests {
         let mut status = VfdStatus::START;
         let mut seen = std::vec::Vec::new();
         for t in [3, 4] {
-            l.step.after_step(&outputs(t, false), &margin, |_| {});
+            l.step
+                .after_step(&outputs(t, false), &values(t), &margin, |_| {});
         }
         let task = vfd_master(
             &mut l.vfd_wait,
@@ -571,7 +585,8 @@ mod tests {
     fn the_boards_links_connect_the_tasks() {
         let mut l = super::links();
         let margin = Margin::new();
-        l.step.after_step(&outputs(9, true), &margin, |_| {});
+        l.step
+            .after_step(&outputs(9, true), &values(9), &margin, |_| {});
         assert_eq!(l.vfd_wait.try_read().map(|r| r.t_ms), Some(9));
         assert!(l.scada_wait.try_recv().is_ok());
         assert!(l.scada_wake_isr.try_send(()).is_ok());

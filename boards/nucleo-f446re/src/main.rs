@@ -459,8 +459,9 @@ mod app {
             l.led.toggle();
         }
         let published = &mut cx.shared.published;
-        l.step
-            .after_step(&out, &MARGIN, |p| published.lock(|x| *x = *p));
+        l.step.after_step(&out, l.core.published(), &MARGIN, |p| {
+            published.lock(|x| *x = *p)
+        });
         record_max(&MARGIN.control_max, cycles().wrapping_sub(t0));
     }
 

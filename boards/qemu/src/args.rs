@@ -4,7 +4,8 @@
 //! `seed=N` (profile and bench seed, 0..=4294967295, default 1), `narmax=f32|q15` (NARMAX
 //! arithmetic), `run_ms=N` (exit 0 after N ms; default: run until QEMU is stopped),
 //! `vfd=uart` (the VFD master on USART2 instead of the in-process drive), `record` (the
-//! commissioning record: a row per pressure sample in the log, `controller::record`),
+//! commissioning record: a row per pressure sample in the log, `controller::record`), `adapt`
+//! (the NARMAX models follow the load from start-up: holding register 19 at 1),
 //! `head=800..1200` and `torque=800..1200` (the virtual bench's pump-head and load-torque
 //! curves, per mille of the paper's; defaults 1000 and 1020). A bad argument is reported and
 //! the firmware exits with status 1.
@@ -28,6 +29,8 @@ pub struct Args {
     pub arithmetic: Arithmetic,
     /// The commissioning record on (`record`).
     pub record: bool,
+    /// The NARMAX models follow the load from start-up (`adapt`).
+    pub adapt: bool,
     /// The virtual bench's pump-head curve, per mille of the paper's (`head=800..1200`).
     pub head_pml: u32,
     /// The virtual bench's load-torque curve, per mille of the paper's (`torque=800..1200`).
@@ -60,6 +63,7 @@ pub fn parse_args(line: &[u8]) -> Result<Args, &[u8]> {
         vfd_uart: false,
         arithmetic: Arithmetic::F32,
         record: false,
+        adapt: false,
         head_pml: 1000,
         torque_pml: 1020,
     };
@@ -84,6 +88,7 @@ pub fn parse_args(line: &[u8]) -> Result<Args, &[u8]> {
             b"run_ms" => a.run_ms = Some(n()?),
             b"vfd" if value == b"uart" => a.vfd_uart = true,
             b"record" if value.is_empty() => a.record = true,
+            b"adapt" if value.is_empty() => a.adapt = true,
             b"head" | b"torque" => {
                 let pml = n()?;
                 if !CURVE_PML.contains(&pml) {

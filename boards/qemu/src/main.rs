@@ -126,6 +126,7 @@ mod app {
             initial_setpoint_pct: controller::scada::setpoint_pct(a.setpoint),
             profile_seed: u64::from(a.seed),
             initial_arithmetic: a.arithmetic,
+            initial_narmax_adapt: a.adapt,
             virtual_bench: true,
             ..Config::bench()
         };
@@ -171,7 +172,7 @@ mod app {
             links.step.record(core.sample_periods_ms());
         }
         defmt::info!(
-            "firmware: virtual bench, SCADA unit 1 on USART1, VFD {=str}, mode={=u16} setpoint={=u16} seed={=u32} narmax={=str} head={=u32} torque={=u32} record={=bool}{=str}",
+            "firmware: virtual bench, SCADA unit 1 on USART1, VFD {=str}, mode={=u16} setpoint={=u16} seed={=u32} narmax={=str} head={=u32} torque={=u32} record={=bool} adapt={=bool}{=str}",
             if a.vfd_uart { "on USART2" } else { "virtual" },
             controller::scada::mode_register(a.mode),
             a.setpoint,
@@ -180,6 +181,7 @@ mod app {
             a.head_pml,
             a.torque_pml,
             a.record,
+            a.adapt,
             if a.run_ms.is_some() { "" } else { ", runs until stopped" }
         );
         let _ = scada::spawn();
@@ -263,7 +265,9 @@ mod app {
             // When QEMU catches up several late steps in one run of this task, the VFD
             // master's next pass takes the last one's request and time.
             let published = &mut cx.shared.published;
-            links.after_step(&out, &MARGIN, |p| published.lock(|x| *x = *p));
+            links.after_step(&out, core.published(), &MARGIN, |p| {
+                published.lock(|x| *x = *p)
+            });
             if cx.local.run_ms.is_some_and(|end| out.t_ms + 1 >= end) {
                 links.log(LogMsg::Done { failed: false });
                 *cx.local.stopped = true;

@@ -180,9 +180,9 @@ mod app {
             while let Some(byte) = l.plant_port.take_byte() {
                 let mut reply = ReplyLine::new();
                 let served = session.lock(|s| {
-                    s.feed(byte, l.core, &mut reply, |out| {
+                    s.feed(byte, l.core, &mut reply, |out, values| {
                         l.step
-                            .after_step(out, &MARGIN, |p| published.lock(|x| *x = *p))
+                            .after_step(out, values, &MARGIN, |p| published.lock(|x| *x = *p))
                     })
                 });
                 if !reply.is_empty() && !l.plant_port.send_frame(reply.as_bytes()) {
