@@ -272,11 +272,6 @@ impl<const F: usize, const H: usize> NarmaxModel<F, H> {
         })
     }
 
-    /// The output map's fallback shows (the model-residual alarm).
-    pub fn fallback_shown(&self) -> bool {
-        self.follow.fallback_left > 0
-    }
-
     /// Sample period, ms.
     pub fn period_ms(&self) -> u32 {
         self.period_ms

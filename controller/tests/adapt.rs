@@ -94,3 +94,42 @@ fn a_lost_transmitter_freezes_the_map_and_the_model_runs_on() {
     println!("the same without the map: {p0:.2} %");
     assert!(p * 4.0 < p0, "{p} vs {p0}");
 }
+
+/// The valve back at the one the model was trained at while the map still holds ×1.3: the
+/// map does worse than no map, falls back to the identity (the shipped model) and raises the
+/// model-residual alarm for a while, in the published alarms and the status's "any alarm";
+/// with register 19 off, the same valve moves raise nothing.
+#[test]
+fn a_fallback_raises_the_model_residual_alarm() {
+    use controller::types::Status;
+    use model_core::monitor::MODEL_RESIDUAL;
+    for adapt in [1, 0] {
+        let mut b = setup(Mode::Profile, 0.0);
+        write_holding(&mut b, ADAPT, adapt);
+        write_holding(&mut b, VALVE, 1300);
+        run(&mut b, 40_000);
+        assert_eq!(b.controller.published().alarms & MODEL_RESIDUAL, 0);
+        write_holding(&mut b, VALVE, 1000);
+        let (mut first, mut shown) = (None, 0u32);
+        for ms in 0..10_000 {
+            b.tick().unwrap();
+            let p = b.controller.published();
+            if p.alarms & MODEL_RESIDUAL != 0 {
+                first.get_or_insert(ms);
+                shown += 1;
+                assert!(Status::from_bits(p.status).any_alarm);
+            }
+        }
+        println!("register 19 = {adapt}: valve back to x1: alarm first at {first:?} ms, shown {shown} ms");
+        if adapt == 1 {
+            // Within two memories (ADAPT_TAU_S = 2 s) of the move.
+            let first = first.expect("the map fell back");
+            assert!(first < 4_000, "{first} ms");
+            // Shown for 60 samples of the model that fell back (3 s of pressure samples, 6 s
+            // of flow ones), unless it falls back again.
+            assert!(shown >= 2_900, "{shown} ms");
+        } else {
+            assert_eq!(first, None);
+        }
+    }
+}

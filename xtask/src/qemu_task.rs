@@ -8,12 +8,13 @@ use crate::qemu::{qemu_command, qemu_log, start_pty};
 use crate::util::Result;
 
 /// `cargo xtask qemu`'s usage.
-pub const QEMU_USAGE: &str = "usage: cargo xtask qemu [--scada-pty] [--vfd PTY | --plant PTY|pty] [--seconds N] [--mode 0|1|2] [--setpoint 0..10000] [--seed N] [--narmax f32|q15] [--head PML] [--torque PML]
+pub const QEMU_USAGE: &str = "usage: cargo xtask qemu [--scada-pty] [--vfd PTY | --plant PTY|pty] [--seconds N] [--mode 0|1|2] [--setpoint 0..10000] [--seed N] [--narmax f32|q15] [--adapt] [--head PML] [--torque PML]
   (no --scada-pty)  run the virtual bench for --seconds (default 20) of loop time, mode 2 (the
                     paper's excitation) unless --mode says otherwise, deterministic and faster
                     than real time (-icount); the kernels' cost is `cargo xtask bench`
   --scada-pty       real time, until stopped (Ctrl-C): the SCADA slave (unit 1, 19200 8N1 RTU)
                     on a pseudo-terminal; QEMU prints its path. Starts stopped (mode 0).
+  --adapt           the NARMAX models follow the load from start-up (holding register 19 at 1)
   --head, --torque  the virtual bench's pump-head and load-torque curves, per mille of the
                     paper's (800..1200; defaults 1000 and 1020), e.g. the bench a record was
                     made on (cargo xtask record)
@@ -23,7 +24,7 @@ pub const QEMU_USAGE: &str = "usage: cargo xtask qemu [--scada-pty] [--vfd PTY |
                     plant protocol (controller::plant), on that serial device, or with `pty`
                     on a pseudo-terminal QEMU makes and names (python3 examples/plant.py
                     /dev/pts/N); ends when the plant sends Q. Takes no --mode, --setpoint,
-                    --seed, --narmax, --head, --torque, --seconds: the plant writes the
+                    --seed, --narmax, --adapt, --head, --torque, --seconds: the plant writes the
                     registers";
 
 /// Options of `cargo xtask qemu`.
@@ -98,6 +99,7 @@ fn parse_qemu_options(args: &[String]) -> Result<QemuOptions> {
             "--narmax" => o
                 .firmware_args
                 .push(format!("narmax={}", value("--narmax")?)),
+            "--adapt" => o.firmware_args.push("adapt".to_string()),
             "--head" => o.firmware_args.push(format!("head={}", value("--head")?)),
             "--torque" => o
                 .firmware_args
@@ -107,7 +109,7 @@ fn parse_qemu_options(args: &[String]) -> Result<QemuOptions> {
     }
     if o.plant.is_some() && (o.vfd.is_some() || !o.firmware_args.is_empty()) {
         return Err(format!(
-            "--plant takes no --vfd, --mode, --setpoint, --seed, --narmax, --head or --torque\n{QEMU_USAGE}"
+            "--plant takes no --vfd, --mode, --setpoint, --seed, --narmax, --adapt, --head or --torque\n{QEMU_USAGE}"
         ));
     }
     Ok(o)
@@ -231,6 +233,12 @@ mod tests {
             o.firmware_args(),
             ["head=950", "torque=1050", "mode=2", "run_ms=20001"]
         );
+        let o = parse_qemu_options(&args("--adapt --narmax q15")).unwrap();
+        assert_eq!(
+            o.firmware_args(),
+            ["adapt", "narmax=q15", "mode=2", "run_ms=20001"]
+        );
+        assert!(parse_qemu_options(&args("--plant pty --adapt")).is_err());
     }
 
     #[test]
