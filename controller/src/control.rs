@@ -185,54 +185,76 @@ pub struct NarmaxModel<const F: usize, const H: usize> {
 /// A model following the load: its output map while on, the measurement it takes next, and
 /// its fallback's alarm. Apart from the generic [`NarmaxModel`] and out of line, so that both
 /// models share one copy of its code.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone)]
 struct Follow {
+    /// The model's output scaling (its training's), for the map.
+    scaling: Scaling<f32>,
+    /// The model's sample period, s.
+    period_s: f32,
     /// The map, while following (built when turned on: forgotten when turned off).
     map: Option<OutputMap<f32>>,
     /// The last sample's (network output, measurement), for [`Self::settle`].
     pending: Option<(f32, f32)>,
     /// Samples left during which the map's last fallback shows as the model-residual alarm.
     fallback_left: u16,
+    /// [`Commands::narmax_adapt_offs`] at the last sample.
+    offs_seen: u16,
 }
 
 impl Follow {
-    /// One sample of the network's free-run output `network` (training `scaling`, sampled
-    /// every `period_s`): the adapted output; `in_span` waits for [`Self::settle`]. Turned
-    /// on, the map starts at the identity; turned off, it is forgotten.
+    /// Not following, for a model with this output `scaling` sampled every `period_s`.
+    fn new(scaling: Scaling<f32>, period_s: f32) -> Self {
+        Self {
+            scaling,
+            period_s,
+            map: None,
+            pending: None,
+            fallback_left: 0,
+            offs_seen: 0,
+        }
+    }
+
+    /// One sample of the network's free-run output `network`: the adapted output while `on`;
+    /// `in_span` waits for [`Self::settle`]. Turned on, the map starts at the identity;
+    /// turned off (or `offs`, the count of register 19's writes of 0, changed since the last
+    /// sample: a 0 however soon followed by a 1), it is forgotten. Out of line, and called on
+    /// every sample, so that the 1 ms step holds only the call.
     #[inline(never)]
-    fn sample(
-        &mut self,
-        on: bool,
-        network: f32,
-        in_span: Option<f32>,
-        scaling: Scaling<f32>,
-        period_s: f32,
-    ) -> f32 {
+    fn sample(&mut self, on: bool, offs: u16, network: f32, in_span: Option<f32>) -> f32 {
+        if !on && self.map.is_none() && offs == self.offs_seen {
+            return network;
+        }
+        if !on || offs != self.offs_seen {
+            self.forget();
+            self.offs_seen = offs;
+        }
         self.pending = None;
         if !on {
-            self.map = None;
-            self.fallback_left = 0;
             return network;
         }
         self.fallback_left = self.fallback_left.saturating_sub(1);
         if self.map.is_none() {
-            // Refused only for a model whose scaling is not usable (a std not > 0): then it
-            // cannot follow, and says so as a fallback would.
-            self.map = OutputMap::new(scaling, period_s, ADAPT_TAU_S).ok();
-            if self.map.is_none() {
-                self.fallback_left = ADAPT_FALLBACK_SHOWN_SAMPLES;
-                return network;
-            }
+            // Never refused for a model built by model-core: its output's std is checked
+            // finite and > 0 when it is built, its period is 1..=1000 ms, the memory a
+            // constant in range. (Refused, the model would run free as identified.)
+            self.map = OutputMap::new(self.scaling, self.period_s, ADAPT_TAU_S).ok();
         }
         self.pending = in_span.map(|m| (network, m));
         self.map.as_ref().map_or(network, |m| m.output(network))
     }
 
+    /// The map, the reading waiting and the fallback's alarm forgotten.
+    fn forget(&mut self) {
+        (self.map, self.pending, self.fallback_left) = (None, None, 0);
+    }
+
     /// The map takes the last sample's measurement, on the tick after it (the sample's tick
-    /// also runs the observer: the update kept out of the longest tick).
+    /// also runs the observer: the update kept out of the longest tick); nothing if following
+    /// was turned `off` since.
     #[inline(never)]
-    fn settle(&mut self) {
-        if let (Some(map), Some((network, m))) = (&mut self.map, self.pending.take()) {
+    fn settle(&mut self, on: bool) {
+        let pending = self.pending.take().filter(|_| on);
+        if let (Some(map), Some((network, m))) = (&mut self.map, pending) {
             if map.update(network, m).diverged {
                 self.fallback_left = ADAPT_FALLBACK_SHOWN_SAMPLES;
             }
@@ -268,7 +290,7 @@ impl<const F: usize, const H: usize> NarmaxModel<F, H> {
             q15,
             period_ms,
             last: y0,
-            follow: Follow::default(),
+            follow: Follow::new(float.output_scaling(), period_ms as f32 * 1e-3),
         })
     }
 
@@ -296,17 +318,13 @@ impl<const F: usize, const H: usize> NarmaxModel<F, H> {
         out
     }
 
-    /// The sample's output `y` of a free run through the output map while `on`
-    /// ([`Follow::sample`]; `in_span`: the reading, if inside its span, that the map takes on
-    /// the next tick). Off and forgotten, `y` itself.
+    /// The sample's output `y` of a free run through the output map while register 19 says
+    /// so ([`Follow::sample`]; `in_span`: the reading, if inside its span, that the map takes
+    /// on the next tick).
     #[inline(always)]
-    fn follow(&mut self, on: bool, y: f32, in_span: Option<f32>) -> f32 {
-        if !on && self.follow.map.is_none() && self.follow.fallback_left == 0 {
-            return y;
-        }
-        let period_s = self.period_ms as f32 * 1e-3;
+    fn follow(&mut self, c: &Commands, y: f32, in_span: Option<f32>) -> f32 {
         self.follow
-            .sample(on, y, in_span, self.float.output_scaling(), period_s)
+            .sample(c.narmax_adapt, c.narmax_adapt_offs, y, in_span)
     }
 }
 
@@ -388,6 +406,9 @@ pub struct Commands {
     /// map of its output is fitted to the measurements ([`model_core::narmax::adapt`]);
     /// `false`: one-step-ahead on the measurements.
     pub narmax_adapt: bool,
+    /// Writes of 0 to holding register 19 so far (wraps): a change forgets the maps, however
+    /// soon a 1 follows (a 0 held for less than a sample would not be seen otherwise).
+    pub narmax_adapt_offs: u16,
     /// Virtual bench valve, × nominal k2 ([`crate::types::VALVE_FACTOR_RANGE`]).
     pub valve_factor: f32,
     /// Faults injected into the virtual bench.
@@ -979,8 +1000,8 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
         if self.follow_due {
             // The output maps take the last samples' measurements (see `Follow::settle`).
             self.follow_due = false;
-            self.pressure.follow.settle();
-            self.flow.follow.settle();
+            self.pressure.follow.settle(adapt);
+            self.flow.follow.settle(adapt);
             let shown =
                 self.pressure.follow.fallback_left > 0 || self.flow.follow.fallback_left > 0;
             self.adapt_alarm = if shown {
@@ -1040,7 +1061,7 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
                     u,
                     good.then_some(r.value).filter(|_| !adapt),
                 );
-                let y = self.pressure.follow(adapt, nx.y, pressure_measured);
+                let y = self.pressure.follow(&inp.commands, nx.y, pressure_measured);
                 self.follow_due |= adapt || self.adapt_alarm != 0;
                 self.nx_clamped[0] = nx.clamped;
                 o.pressure_mca = r.value;
@@ -1065,7 +1086,7 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
                     u,
                     good.then_some(r.value).filter(|_| !adapt),
                 );
-                let y = self.flow.follow(adapt, nx.y, flow_measured);
+                let y = self.flow.follow(&inp.commands, nx.y, flow_measured);
                 self.follow_due |= adapt || self.adapt_alarm != 0;
                 self.nx_clamped[1] = nx.clamped;
                 o.flow_lps = r.value;
@@ -1195,17 +1216,17 @@ mod tests {
     /// output map run as `pumpbench simulate --adapt` runs it (output, then update).
     #[test]
     fn following_is_the_output_map_one_tick_later() {
-        let mut f = Follow::default();
+        let mut f = Follow::new(S, TS);
         let mut map = OutputMap::new(S, TS, ADAPT_TAU_S).unwrap();
         for k in 0..2000 {
             let y = network(k);
             let m = (k % 7 != 3).then_some(1.3 * y - 0.4);
-            let out = f.sample(true, y, m, S, TS);
+            let out = f.sample(true, 0, y, m);
             assert_eq!(out.to_bits(), map.output(y).to_bits(), "sample {k}");
             if let Some(m) = m {
                 map.update(y, m);
             }
-            f.settle();
+            f.settle(true);
         }
         let (a, b) = map.gain_offset();
         assert!((a - 1.3).abs() < 0.05 && b.abs() < 0.5, "learnt ({a}, {b})");
@@ -1214,34 +1235,49 @@ mod tests {
     /// Turned off, the map is forgotten: turned on again, it starts at the identity.
     #[test]
     fn turning_it_off_forgets_the_map() {
-        let mut f = Follow::default();
+        let mut f = Follow::new(S, TS);
         for k in 0..400 {
-            f.sample(true, network(k), Some(1.3 * network(k)), S, TS);
-            f.settle();
+            f.sample(true, 0, network(k), Some(1.3 * network(k)));
+            f.settle(true);
         }
-        assert_ne!(f.sample(true, 2.5, None, S, TS), 2.5, "a map learnt");
-        assert_eq!(f.sample(false, 2.5, Some(4.0), S, TS), 2.5);
-        f.settle();
+        assert_ne!(f.sample(true, 0, 2.5, None), 2.5, "a map learnt");
+        assert_eq!(f.sample(false, 0, 2.5, Some(4.0)), 2.5);
+        f.settle(false);
         assert!(f.map.is_none());
-        assert_eq!(f.sample(true, 2.5, None, S, TS), 2.5, "the identity");
+        assert_eq!(f.sample(true, 0, 2.5, None), 2.5, "the identity");
+    }
+
+    /// A reading waiting for the next tick when following is turned off is not taken.
+    #[test]
+    fn a_pending_reading_is_dropped_when_turned_off() {
+        let mut f = Follow::new(S, TS);
+        for k in 0..400 {
+            f.sample(true, 0, network(k), Some(1.3 * network(k)));
+            f.settle(true);
+        }
+        let before = f.map.as_ref().unwrap().gain_offset();
+        f.sample(true, 0, 2.5, Some(9.0));
+        f.settle(false);
+        assert_eq!(f.map.as_ref().unwrap().gain_offset(), before);
+        assert_eq!(f.pending, None);
     }
 
     /// A map that does worse than none (learnt at one valve, the plant back at the model)
     /// returns to the identity, and the fallback shows as the model-residual alarm.
     #[test]
     fn a_map_worse_than_none_falls_back_and_raises_the_alarm() {
-        let mut f = Follow::default();
+        let mut f = Follow::new(S, TS);
         let mut k = 0;
         for _ in 0..400 {
-            f.sample(true, network(k), Some(network(k) + 1.0), S, TS);
-            f.settle();
+            f.sample(true, 0, network(k), Some(network(k) + 1.0));
+            f.settle(true);
             k += 1;
         }
         assert_eq!(f.fallback_left, 0);
         let mut fell = None;
         for n in 0..200 {
-            f.sample(true, network(k), Some(network(k)), S, TS);
-            f.settle();
+            f.sample(true, 0, network(k), Some(network(k)));
+            f.settle(true);
             k += 1;
             if f.fallback_left > 0 {
                 fell = Some(n);
@@ -1250,12 +1286,108 @@ mod tests {
         }
         let n = fell.expect("the map fell back");
         assert!(n < 20, "after {n} samples");
-        assert_eq!(
-            f.sample(true, 3.0, None, S, TS),
-            3.0,
-            "back at the identity"
-        );
+        assert_eq!(f.sample(true, 0, 3.0, None), 3.0, "back at the identity");
         assert_eq!(f.fallback_left, ADAPT_FALLBACK_SHOWN_SAMPLES - 1);
+    }
+
+    type Board = crate::virtual_bench::VirtualBoard<
+        { pump_models::pressure::FRAMES },
+        { pump_models::pressure::HIDDEN },
+        { pump_models::flow::FRAMES },
+        { pump_models::flow::HIDDEN },
+    >;
+
+    /// The virtual board in profile mode, the models following the load from start-up.
+    fn following_board() -> Board {
+        use pump_models::{flow, pressure};
+        let cfg = Config {
+            initial_mode: Mode::Profile,
+            initial_narmax_adapt: true,
+            virtual_bench: true,
+            ..Config::bench()
+        };
+        let p = NarmaxModel::new(&pressure::F32, &pressure::Q15, 50).unwrap();
+        let q = NarmaxModel::new(&flow::F32, &flow::Q15, 100).unwrap();
+        let bench = crate::virtual_bench::VirtualBenchConfig::default_offsets(7);
+        Board::new(&cfg, p, q, bench).unwrap()
+    }
+
+    /// Holding register 19 written `v` over SCADA.
+    fn write_19(b: &mut Board, v: u8) {
+        let body = [1, 6, 0, 19, 0, v];
+        let [c0, c1] = crate::modbus::crc16(&body).to_le_bytes();
+        let req = [1, 6, 0, 19, 0, v, c0, c1];
+        assert!(b
+            .scada
+            .handle(&req, &mut crate::modbus::Frame::new())
+            .is_some());
+        assert_eq!(b.scada.commands().narmax_adapt, v == 1);
+    }
+
+    /// Each model's map as the controller holds it (the identity when there is none).
+    fn maps(b: &Board) -> [(f32, f32); 2] {
+        let g = |f: &Follow| f.map.as_ref().map_or((1.0, 0.0), |m| m.gain_offset());
+        [
+            g(&b.controller.pressure.follow),
+            g(&b.controller.flow.follow),
+        ]
+    }
+
+    /// In `Controller::step`, a map takes its sample's reading on the tick after the sample,
+    /// never on the sample's own tick (the observer's).
+    #[test]
+    fn the_maps_learn_on_the_tick_after_each_sample() {
+        let mut b = following_board();
+        let mut last = maps(&b);
+        let mut changes = [0; 2];
+        for _ in 0..5000 {
+            let t = b.tick().unwrap().t_ms;
+            let now = maps(&b);
+            for (k, period) in [(0, 50), (1, 100)] {
+                if now[k] != last[k] {
+                    assert_eq!(t % period, 1, "model {k}'s map changed at {t} ms");
+                    changes[k] += 1;
+                }
+            }
+            last = now;
+        }
+        assert!(changes[0] > 90 && changes[1] > 45, "{changes:?}");
+    }
+
+    /// Register 19 written 0 then 1 between two samples: the maps are forgotten all the same.
+    #[test]
+    fn a_zero_between_two_samples_forgets_the_maps() {
+        let mut b = following_board();
+        for _ in 0..5001 {
+            b.tick().unwrap();
+        }
+        assert!(
+            maps(&b).iter().all(|&m| m != (1.0, 0.0)),
+            "learnt: {:?}",
+            maps(&b)
+        );
+        write_19(&mut b, 0);
+        write_19(&mut b, 1);
+        // The next tick is 5 001 ms: no sample. Each map starts again at the identity at its
+        // model's next sample: the pressure's at 5 050 ms, the flow's at 5 100 ms.
+        for _ in 0..49 {
+            b.tick().unwrap();
+        }
+        assert!(
+            maps(&b).iter().all(|&m| m != (1.0, 0.0)),
+            "not yet a sample"
+        );
+        b.tick().unwrap();
+        assert_eq!(
+            maps(&b)[0],
+            (1.0, 0.0),
+            "the pressure's forgotten at its sample"
+        );
+        assert_ne!(maps(&b)[1], (1.0, 0.0));
+        for _ in 0..50 {
+            b.tick().unwrap();
+        }
+        assert_eq!(maps(&b)[1], (1.0, 0.0), "the flow's at its own");
     }
 
     proptest::proptest! {
@@ -1269,14 +1401,16 @@ mod tests {
                 1..400,
             )
         ) {
-            let mut f = Follow::default();
+            let mut f = Follow::new(S, TS);
             for (y, m) in seq {
-                let out = f.sample(true, y, m, S, TS);
+                let out = f.sample(true, 0, y, m);
                 proptest::prop_assert!(!y.is_finite() || out.is_finite(), "{} -> {}", y, out);
-                f.settle();
+                f.settle(true);
                 if let Some(map) = &f.map {
+                    use model_core::narmax::adapt::{A_RANGE, B_MAX};
                     let (a, b) = map.gain_offset();
-                    proptest::prop_assert!(a.is_finite() && b.is_finite());
+                    proptest::prop_assert!((A_RANGE.0 as f32..=A_RANGE.1 as f32).contains(&a));
+                    proptest::prop_assert!(b.abs() <= B_MAX as f32);
                 }
             }
         }

@@ -288,7 +288,7 @@ pub enum Request {
     Frame(PlantFrame),
     /// `W <register> <value>`: a holding-register write.
     Write {
-        /// Holding register address (0..=65535; the map has 0..=18).
+        /// Holding register address (0..=65535; the map has 0..=19).
         register: u16,
         /// The value (0..=65535).
         value: u16,

@@ -404,6 +404,8 @@ pub struct ScadaSlave {
     pub arithmetic: Arithmetic,
     /// The NARMAX models follow the load (holding register 19).
     pub narmax_adapt: bool,
+    /// Writes of 0 to holding register 19 so far (wraps): each forgets the output maps.
+    pub narmax_adapt_offs: u16,
     /// Holding registers 3 and 4 exist (a virtual bench).
     virtual_bench: bool,
     /// Virtual bench valve, 0.1 % of nominal k2 (500..=2000).
@@ -427,6 +429,7 @@ impl ScadaSlave {
             mode: Mode::Stop,
             arithmetic: Arithmetic::F32,
             narmax_adapt: false,
+            narmax_adapt_offs: 0,
             virtual_bench: false,
             valve_permille: VALVE_NOMINAL_PERMILLE,
             faults: 0,
@@ -475,6 +478,7 @@ impl ScadaSlave {
             setpoint_pct: setpoint_pct(self.setpoint),
             arithmetic: self.arithmetic,
             narmax_adapt: self.narmax_adapt,
+            narmax_adapt_offs: self.narmax_adapt_offs,
             valve_factor: valve_factor(self.valve_permille),
             faults: injected_faults(self.faults),
             stop_writes: self.stop_writes,
@@ -551,7 +555,12 @@ impl ScadaSlave {
                 16 if v <= SETPOINT_FILTER_MAX_MS => next.control.flow_lag_ms = v,
                 17 if CLOSED_LOOP_RANGE_MS.contains(&v) => next.control.pressure_closed_loop_ms = v,
                 18 if CLOSED_LOOP_RANGE_MS.contains(&v) => next.control.flow_closed_loop_ms = v,
-                19 if v <= 1 => next.narmax_adapt = v == 1,
+                19 if v <= 1 => {
+                    next.narmax_adapt = v == 1;
+                    if v == 0 {
+                        next.narmax_adapt_offs = next.narmax_adapt_offs.wrapping_add(1);
+                    }
+                }
                 _ => return Err(Exception::IllegalDataValue),
             }
         }

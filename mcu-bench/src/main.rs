@@ -462,7 +462,10 @@ fn tick_in(mode: Mode, adapt: bool, c: &mut Cost, n: u32) -> Result<(), Error> {
         let [c0, c1] = crc16(&body).to_le_bytes();
         b.scada
             .handle(&[1, 6, 0, 19, 0, 1, c0, c1], &mut Frame::new())
-            .ok_or("adaptation refused")?;
+            .ok_or("no answer to the write of register 19")?;
+        if !b.scada.commands().narmax_adapt {
+            return Err("adaptation refused");
+        }
     }
     for k in 0..n {
         if k % LOOP_STEP_MS == 0 {

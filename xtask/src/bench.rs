@@ -536,8 +536,11 @@ fn budget_failures(
                     continue;
                 };
                 match rounded.get(&name) {
-                    None => failed.push(format!(
+                    None if budget == name => failed.push(format!(
                         "kernel {name}: in bench/baseline.json ({old}) but not measured (rename or remove it there)"
+                    )),
+                    None => failed.push(format!(
+                        "kernel {name}: held to bench/baseline.json's {budget} but not measured"
                     )),
                     Some(&n) if n as f64 > old * (1.0 + KERNEL_TOLERANCE) => failed.push(format!(
                         "kernel {name}: {} instructions per call, {:+.1} % over bench/baseline.json's {}{} (limit +{:.0} %)",
@@ -630,6 +633,7 @@ mod tests {
                 ("a".to_string(), a),
                 ("b".to_string(), b),
                 ("new".to_string(), 9),
+                ("tick_adapt_mean".to_string(), 1),
             ]
             .into()
         };
@@ -656,8 +660,12 @@ mod tests {
         // Without `kernels`, the top-level figures are the budgets.
         let top: serde_json::Value =
             serde_json::from_str(r#"{"rk4_step": 100, "tick_mean": 10}"#).unwrap();
-        let m: BTreeMap<String, i64> =
-            [("rk4_step".to_string(), 106), ("tick_mean".to_string(), 10)].into();
+        let m: BTreeMap<String, i64> = [
+            ("rk4_step".to_string(), 106),
+            ("tick_mean".to_string(), 10),
+            ("tick_adapt_mean".to_string(), 10),
+        ]
+        .into();
         assert_eq!(budget_failures(Some(&top), false, &m, &images).len(), 1);
         // The longest tick in pressure control is held to the tick's max budget.
         let top: serde_json::Value = serde_json::from_str(r#"{"tick_max": 100}"#).unwrap();
@@ -665,6 +673,7 @@ mod tests {
             [
                 ("tick_max".to_string(), 100),
                 ("tick_pressure_max".to_string(), n),
+                ("tick_adapt_max".to_string(), 100),
             ]
             .into()
         };
@@ -672,6 +681,13 @@ mod tests {
         assert_eq!(
             budget_failures(Some(&top), false, &m(106), &images),
             ["kernel tick_pressure_max: 106 instructions per call, +6.0 % over bench/baseline.json's tick_max 100 (limit +5 %)"]
+        );
+        // A row held to another's budget must be measured.
+        let mut gone = m(100);
+        gone.remove("tick_adapt_max");
+        assert_eq!(
+            budget_failures(Some(&top), false, &gone, &images),
+            ["kernel tick_adapt_max: held to bench/baseline.json's tick_max but not measured"]
         );
         // No baseline: a failure, unless it is being saved.
         assert_eq!(

@@ -21,27 +21,68 @@ pub fn cargo() -> Command {
     c
 }
 
-/// A `--config` value that maps `$CARGO_HOME/registry/src/<index>/` to nothing in the MCU
-/// target's file paths (`rustc --remap-path-prefix`): a panic location in a dependency then
-/// reads `rmodbus-0.13.0/src/lib.rs`, not the builder's home directory. The images are the
-/// same bytes whoever builds them, and ≈ 0.4 KB smaller (each path was ≈ 60 bytes of flash).
-/// Added to the target's flags from `.cargo/config.toml` (cargo joins the arrays). `None`
-/// when there is no registry yet (nothing of it to trim).
+/// A `--config` value that maps each directory holding crates.io sources (for cargo's own
+/// registry `$CARGO_HOME/registry/src/<index>/`, or a vendor directory) to nothing in the
+/// MCU target's file paths (`rustc --remap-path-prefix`): a panic location in a dependency
+/// then reads `rmodbus-0.13.0/src/lib.rs`, not the builder's home directory. The images are
+/// the same bytes whoever builds them, and ≈ 0.4 KB smaller (each path was ≈ 60 bytes of
+/// flash). The directories are where `cargo metadata` finds the packages; the flags are added
+/// to the target's from `.cargo/config.toml` (cargo joins the arrays). `None`, with a
+/// warning, if none is found (the images then carry the full paths).
 pub fn trimmed_registry_paths() -> Option<String> {
-    let home = std::env::var_os("CARGO_HOME")
-        .map(PathBuf::from)
-        .or_else(|| std::env::var_os("HOME").map(|h| Path::new(&h).join(".cargo")))?;
-    let mut indexes: Vec<PathBuf> = std::fs::read_dir(home.join("registry").join("src"))
-        .ok()?
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.is_dir())
+    static CONFIG: std::sync::OnceLock<Option<String>> = std::sync::OnceLock::new();
+    CONFIG
+        .get_or_init(|| {
+            let dirs = registry_dirs();
+            if dirs.is_empty() {
+                eprintln!(
+                    "warning: no crates.io source directory found (cargo metadata): the MCU images keep their dependencies' full paths (≈ 0.4 KB of flash)"
+                );
+                return None;
+            }
+            let flags: Vec<String> = dirs
+                .iter()
+                .filter_map(|d| {
+                    // JSON's string escapes are TOML's.
+                    serde_json::to_string(&format!("--remap-path-prefix={}/=", d.to_str()?)).ok()
+                })
+                .collect();
+            Some(format!("target.{TARGET}.rustflags=[{}]", flags.join(", ")))
+        })
+        .clone()
+}
+
+/// The directories holding the workspace's crates.io packages (each package's directory's
+/// parent), from `cargo metadata`; empty if it fails.
+fn registry_dirs() -> Vec<PathBuf> {
+    let out = Command::new(std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into()))
+        .args(["metadata", "--format-version", "1"])
+        .current_dir(root())
+        .output();
+    let Some(json) = out
+        .ok()
+        .filter(|o| o.status.success())
+        .and_then(|o| serde_json::from_slice::<serde_json::Value>(&o.stdout).ok())
+    else {
+        return vec![];
+    };
+    let mut dirs: Vec<PathBuf> = json["packages"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter(|p| {
+            p["source"]
+                .as_str()
+                .is_some_and(|s| s.starts_with("registry+"))
+        })
+        .filter_map(|p| {
+            let manifest = Path::new(p["manifest_path"].as_str()?);
+            Some(manifest.parent()?.parent()?.to_path_buf())
+        })
         .collect();
-    indexes.sort();
-    let flags: Vec<String> = indexes
-        .iter()
-        .map(|dir| format!("{:?}", format!("--remap-path-prefix={}/=", dir.display())))
-        .collect();
-    (!flags.is_empty()).then(|| format!("target.{TARGET}.rustflags=[{}]", flags.join(", ")))
+    dirs.sort();
+    dirs.dedup();
+    dirs
 }
 
 /// The workspace's root directory.
@@ -127,5 +168,27 @@ mod tests {
     fn paths() {
         assert!(root().join("xtask").join("Cargo.toml").is_file());
         assert!(root().join("Cargo.toml").is_file());
+    }
+
+    /// The trimmed directories hold the MCU's dependencies (rmodbus among them), and the
+    /// `--config` value names each as a TOML string.
+    #[test]
+    fn registry_paths_are_trimmed() {
+        let dirs = registry_dirs();
+        assert!(
+            dirs.iter().any(|d| std::fs::read_dir(d).unwrap().any(|e| e
+                .unwrap()
+                .file_name()
+                .to_string_lossy()
+                .starts_with("rmodbus-"))),
+            "{dirs:?}"
+        );
+        let config = trimmed_registry_paths().unwrap();
+        assert!(
+            config.starts_with("target.thumbv7em-none-eabihf.rustflags=[\"--remap-path-prefix=")
+        );
+        for d in &dirs {
+            assert!(config.contains(&format!("{}/=", d.display())), "{config}");
+        }
     }
 }
