@@ -82,6 +82,20 @@ pub fn lag_exact<T: Real>(reading: &mut T, value: T, h_s: T, tau_s: T) {
     }
 }
 
+/// The inverse of [`lag_exact`]: the value held over the last step (`h_s`, s) that took a
+/// reading from `previous` to `reading` through a first-order lag of `tau_s` (s; ≤ 0: none,
+/// the reading itself): `previous + (reading − previous) / (1 − e^(−h/τ))`. For a smooth
+/// series (a model's prediction of a reading), it estimates the process value before the
+/// transmitter; on a noisy reading it amplifies the noise by up to `2 / (1 − e^(−h/τ))`.
+#[inline]
+pub fn unlag<T: Real>(reading: T, previous: T, h_s: T, tau_s: T) -> T {
+    if tau_s <= T::ZERO || h_s <= T::ZERO {
+        reading
+    } else {
+        previous + (reading - previous) / (T::ONE - decay(h_s, tau_s))
+    }
+}
+
 /// One 1 ms step of the same lag by forward Euler (the reading moves by `1 ms / τ` of the
 /// gap; τ ≤ 1 ms: none): no `exp` on the MCU. In effect a lag about 0.5 ms shorter than τ:
 /// its step response stays within 0.94 % of the step of [`lag_exact`]'s at τ = 20 ms, 0.47 %
@@ -183,6 +197,26 @@ impl LoopConfig {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `unlag` undoes `lag_exact` for a value held over each step, whatever the lag and the
+    /// step; without a lag it is the reading.
+    #[test]
+    fn unlag_inverts_the_exact_lag() {
+        for (h, tau) in [(0.05, 0.02), (0.05, 0.06), (0.1, 0.15), (0.1, 2.0)] {
+            let mut reading = 1.0f64;
+            for value in [1.0, 3.5, 3.5, -2.0, 0.25, 7.0] {
+                let previous = reading;
+                lag_exact(&mut reading, value, h, tau);
+                let back = unlag(reading, previous, h, tau);
+                assert!(
+                    (back - value).abs() < 1e-12,
+                    "h {h} tau {tau}: {back} vs {value}"
+                );
+            }
+        }
+        assert_eq!(unlag(2.0, 1.0, 0.05, 0.0), 2.0);
+        assert_eq!(unlag(2.0f32, 1.0, 0.0, 0.1), 2.0);
+    }
 
     /// The exact lag follows 1 − e^(−t/τ) of a step; the 1 ms forward step follows it within
     /// the bounds its docs state.

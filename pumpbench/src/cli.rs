@@ -258,6 +258,14 @@ pub struct SimulateArgs {
     /// exp(−Ts/τ). Only with `--adapt output-map`.
     #[arg(long, value_parser = parse_positive)]
     pub adapt_tau_s: Option<f64>,
+    /// NARMAX only: the transmitter's time constant (its damping), ms (0..2000): the output
+    /// becomes the model's estimate of the process value before the transmitter, its
+    /// prediction of the reading taken back through that first-order lag
+    /// (model_core::transmitter::unlag). The model is identified on, and its map follows, the
+    /// readings: this is for comparing it with the process value (a bench's truth). Default:
+    /// the prediction of the reading.
+    #[arg(long)]
+    pub sensor_lag_ms: Option<String>,
 }
 
 /// How `simulate --model narmax` follows the plant.

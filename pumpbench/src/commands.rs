@@ -259,15 +259,16 @@ pub fn simulate(a: SimulateArgs) -> Result<(), Failure> {
         output,
         adapt,
         adapt_tau_s,
+        sensor_lag_ms,
     } = a;
     let mut inputs = vec![("--input", input.as_path())];
     inputs.extend(weights.as_deref().map(|w| ("--weights", w)));
     check_optional_output(&inputs, output.as_deref())?;
     match model {
         Model::Whitebox => {
-            if adapt != Adapt::Off || adapt_tau_s.is_some() {
+            if adapt != Adapt::Off || adapt_tau_s.is_some() || sensor_lag_ms.is_some() {
                 return Err(Failure::usage(
-                    "--adapt is for NARMAX models (--model narmax)".into(),
+                    "--adapt and --sensor-lag-ms are for NARMAX models (--model narmax)".into(),
                 ));
             }
             let data = input::read_input_to_integrate(&input, step_ms, simulate::TOO_MANY_STEPS)?;
@@ -291,10 +292,14 @@ pub fn simulate(a: SimulateArgs) -> Result<(), Failure> {
                 }
                 (Adapt::OutputMap, tau) => Some(tau.unwrap_or(DEFAULT_ADAPT_TAU_S)),
             };
+            let sensor_lag_s = sensor_lag_ms
+                .map(|t| crate::plant::parse_lag_ms("--sensor-lag-ms", &t))
+                .transpose()
+                .map_err(Failure::usage)?;
             let series = narmaxcmd::read_for_model(&m, &input, adapt.is_some())?;
             with_narmax!(m, precision, |model| output::write_csv(
                 output.as_deref(),
-                |w| { narmaxcmd::simulate(&model, &m, &series, adapt, w) }
+                |w| { narmaxcmd::simulate(&model, &m, &series, adapt, sensor_lag_s, w) }
             ))
         }
     }

@@ -351,23 +351,39 @@ pub fn quantized(m: &ModelFile) -> Result<HostNarxQ15, Failure> {
 }
 
 /// `simulate --model narmax`: the free run, alone or (`adapt_tau_s`) with the output map
-/// fitted on line to the series' measurements.
+/// fitted on line to the series' measurements; with `sensor_lag_s`, taken back through the
+/// transmitter's lag ([`unlagged`]).
 pub fn simulate<M: Predictor>(
     model: &M,
     m: &ModelFile,
     series: &Series,
     adapt_tau_s: Option<f64>,
+    sensor_lag_s: Option<f64>,
     w: &mut dyn Write,
 ) -> Result<(), Failure> {
-    let y = match adapt_tau_s {
+    let mut y = match adapt_tau_s {
         None => free_run(model, series)?,
         Some(tau) => free_run_adapted(model, m, series, tau)?,
     };
+    if let Some(tau) = sensor_lag_s {
+        y = unlagged(&y, m.sample_period_s, tau);
+    }
     writeln!(w, "t_s,torque_ref_pct,{}", m.target.column()).map_err(io)?;
     for ((t, u), v) in series.t_s.iter().zip(&series.torque_ref_pct).zip(&y) {
         writeln!(w, "{},{},{}", Short(*t), Short(*u), Short(*v)).map_err(io)?;
     }
     Ok(())
+}
+
+/// A prediction of a transmitter's readings `y` (one every `ts_s` s) taken back through its
+/// first-order lag of `tau_s` s: the estimate of the process value before the transmitter
+/// (`model_core::transmitter::unlag`, each row from the row before; the first as it is).
+pub fn unlagged(y: &[f64], ts_s: f64, tau_s: f64) -> Vec<f64> {
+    use model_core::transmitter::unlag;
+    let mut out = Vec::with_capacity(y.len());
+    out.extend(y.first().copied());
+    out.extend(y.windows(2).map(|w| unlag(w[1], w[0], ts_s, tau_s)));
+    out
 }
 
 /// `steady --model narmax`.
