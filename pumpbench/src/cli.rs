@@ -260,11 +260,11 @@ pub struct SimulateArgs {
     pub adapt_tau_s: Option<f64>,
     /// NARMAX only: the transmitter's time constant (its damping), ms (0..2000): the output
     /// becomes the model's estimate of the process value before the transmitter, its
-    /// prediction of the reading taken back through that first-order lag
-    /// (model_core::transmitter::unlag). The model is identified on, and its map follows, the
-    /// readings: this is for comparing it with the process value (a bench's truth). Default:
-    /// the prediction of the reading.
-    #[arg(long)]
+    /// prediction of the reading taken back through that first-order lag, x = y + τ·dy/dt
+    /// (model_core::transmitter::unlag; the seed rows echoed as they are). The model is
+    /// identified on, and its map follows, the readings: this is for comparing it with the
+    /// process value (a bench's truth). Default: the prediction of the reading.
+    #[arg(long, value_name = "MS", allow_hyphen_values = true)]
     pub sensor_lag_ms: Option<String>,
 }
 

@@ -366,7 +366,12 @@ pub fn simulate<M: Predictor>(
         Some(tau) => free_run_adapted(model, m, series, tau)?,
     };
     if let Some(tau) = sensor_lag_s {
-        y = unlagged(&y, m.sample_period_s, tau);
+        let seeded = if series.y.is_some() {
+            model.lags().max_lag().min(y.len())
+        } else {
+            0
+        };
+        y = unlagged(&y, &series.t_s, seeded, tau);
     }
     writeln!(w, "t_s,torque_ref_pct,{}", m.target.column()).map_err(io)?;
     for ((t, u), v) in series.t_s.iter().zip(&series.torque_ref_pct).zip(&y) {
@@ -375,15 +380,19 @@ pub fn simulate<M: Predictor>(
     Ok(())
 }
 
-/// A prediction of a transmitter's readings `y` (one every `ts_s` s) taken back through its
-/// first-order lag of `tau_s` s: the estimate of the process value before the transmitter
-/// (`model_core::transmitter::unlag`, each row from the row before; the first as it is).
-pub fn unlagged(y: &[f64], ts_s: f64, tau_s: f64) -> Vec<f64> {
+/// A prediction of a transmitter's readings `y` (at the times `t_s`, s) taken back through
+/// its first-order lag of `tau_s` s: the estimate of the process value before the transmitter
+/// (`model_core::transmitter::unlag`, each row from the row before, over the time between
+/// them). The first `seeded` rows are readings echoed as they are (the history's seed), and so
+/// is the first prediction: a reading's noise is not taken through the inverse.
+pub fn unlagged(y: &[f64], t_s: &[f64], seeded: usize, tau_s: f64) -> Vec<f64> {
     use model_core::transmitter::unlag;
-    let mut out = Vec::with_capacity(y.len());
-    out.extend(y.first().copied());
-    out.extend(y.windows(2).map(|w| unlag(w[1], w[0], ts_s, tau_s)));
-    out
+    (0..y.len())
+        .map(|k| match k.checked_sub(1) {
+            Some(j) if k > seeded => unlag(y[k], y[j], t_s[k] - t_s[j], tau_s),
+            _ => y[k],
+        })
+        .collect()
 }
 
 /// `steady --model narmax`.

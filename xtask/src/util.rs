@@ -26,17 +26,21 @@ pub fn cargo() -> Command {
 /// MCU target's file paths (`rustc --remap-path-prefix`): a panic location in a dependency
 /// then reads `rmodbus-0.13.0/src/lib.rs`, not the builder's home directory. The images are
 /// the same bytes whoever builds them, and ≈ 0.4 KB smaller (each path was ≈ 60 bytes of
-/// flash). The directories are where `cargo metadata` finds the packages; the flags are added
-/// to the target's from `.cargo/config.toml` (cargo joins the arrays). `None`, with a
-/// warning, if none is found (the images then carry the full paths).
+/// flash). The directories are where `cargo metadata` (offline) finds the MCU's packages, else
+/// those under `$CARGO_HOME/registry/src`; the flags are added to the target's from
+/// `.cargo/config.toml` (cargo joins the arrays). `None`, with a warning, if none is found or
+/// one is not UTF-8 (the images then carry the full paths, ≈ 0.4 KB more).
 pub fn trimmed_registry_paths() -> Option<String> {
     static CONFIG: std::sync::OnceLock<Option<String>> = std::sync::OnceLock::new();
     CONFIG
         .get_or_init(|| {
-            let dirs = registry_dirs();
+            let mut dirs = registry_dirs();
             if dirs.is_empty() {
+                dirs = registry_src_dirs();
+            }
+            if dirs.is_empty() || dirs.iter().any(|d| d.to_str().is_none()) {
                 eprintln!(
-                    "warning: no crates.io source directory found (cargo metadata): the MCU images keep their dependencies' full paths (≈ 0.4 KB of flash)"
+                    "warning: no crates.io source directory found, or one not UTF-8 (cargo metadata, $CARGO_HOME/registry/src): the MCU images keep their dependencies' full paths (≈ 0.4 KB of flash)"
                 );
                 return None;
             }
@@ -52,11 +56,12 @@ pub fn trimmed_registry_paths() -> Option<String> {
         .clone()
 }
 
-/// The directories holding the workspace's crates.io packages (each package's directory's
-/// parent), from `cargo metadata`; empty if it fails.
+/// The directories holding the MCU's crates.io packages (each package's directory's parent),
+/// from `cargo metadata`, offline (nothing downloaded for other platforms); empty if it fails.
 fn registry_dirs() -> Vec<PathBuf> {
     let out = Command::new(std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into()))
-        .args(["metadata", "--format-version", "1"])
+        .args(["metadata", "--format-version", "1", "--offline", "--locked"])
+        .args(["--filter-platform", TARGET])
         .current_dir(root())
         .output();
     let Some(json) = out
@@ -82,6 +87,26 @@ fn registry_dirs() -> Vec<PathBuf> {
         .collect();
     dirs.sort();
     dirs.dedup();
+    dirs
+}
+
+/// The directories under `$CARGO_HOME/registry/src` (cargo's home: `CARGO_HOME`, else
+/// `$HOME/.cargo`); empty if there is none.
+fn registry_src_dirs() -> Vec<PathBuf> {
+    let Some(home) = std::env::var_os("CARGO_HOME")
+        .map(PathBuf::from)
+        .or_else(|| std::env::var_os("HOME").map(|h| Path::new(&h).join(".cargo")))
+    else {
+        return vec![];
+    };
+    let Ok(entries) = std::fs::read_dir(home.join("registry").join("src")) else {
+        return vec![];
+    };
+    let mut dirs: Vec<PathBuf> = entries
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.is_dir())
+        .collect();
+    dirs.sort();
     dirs
 }
 
@@ -175,6 +200,8 @@ mod tests {
     #[test]
     fn registry_paths_are_trimmed() {
         let dirs = registry_dirs();
+        let src = registry_src_dirs();
+        assert!(dirs.iter().all(|d| src.contains(d)), "{dirs:?} in {src:?}");
         assert!(
             dirs.iter().any(|d| std::fs::read_dir(d).unwrap().any(|e| e
                 .unwrap()
