@@ -365,6 +365,11 @@ pub fn simulate<M: Predictor>(
         None => free_run(model, series)?,
         Some(tau) => free_run_adapted(model, m, series, tau)?,
     };
+    if adapt_tau_s.is_some() && sensor_lag_s.is_none() {
+        eprintln!(
+            "pumpbench: the output predicts the transmitter's reading; --sensor-lag-ms (its time constant) gives the process value before it"
+        );
+    }
     if let Some(tau) = sensor_lag_s {
         let seeded = if series.y.is_some() {
             model.lags().max_lag().min(y.len())
