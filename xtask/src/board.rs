@@ -72,14 +72,12 @@ impl Board {
         }
     }
     /// What the board's own `.cargo/config.toml` adds, for builds from the workspace root
-    /// (the Nucleo: `-C target-cpu=cortex-m4`).
-    pub fn config_args(self) -> &'static [&'static str] {
+    /// (the Nucleo: `-C target-cpu=cortex-m4`), with the trimmed paths
+    /// ([`crate::util::mcu_rustflags`]: one `--config` for the target's flags).
+    pub fn config_args(self) -> Vec<String> {
         match self {
-            Board::Qemu => &[],
-            Board::Nucleo => &[
-                "--config",
-                "target.thumbv7em-none-eabihf.rustflags=[\"-C\", \"target-cpu=cortex-m4\"]",
-            ],
+            Board::Qemu => vec![],
+            Board::Nucleo => crate::util::mcu_rustflags(&["-C", "target-cpu=cortex-m4"]),
         }
     }
     /// The board's firmware binary.
@@ -168,9 +166,7 @@ mod tests {
         }
         // Only the Nucleo adds the CPU (the QEMU images are measured without it).
         assert!(Board::Qemu.config_args().is_empty());
-        assert!(Board::Nucleo
-            .config_args()
-            .concat()
-            .contains("target-cpu=cortex-m4"));
+        let nucleo = Board::Nucleo.config_args().concat();
+        assert!(nucleo.contains("target-cpu=cortex-m4") && nucleo.contains("--remap-path-prefix"));
     }
 }

@@ -15,13 +15,28 @@ pub type Result<T = ()> = std::result::Result<T, String>;
 /// of crates.io sources trimmed ([`trimmed_registry_paths`]).
 pub fn cargo() -> Command {
     let mut c = Command::new(std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into()));
-    if let Some(config) = trimmed_registry_paths() {
-        c.arg("--config").arg(config);
-    }
+    c.args(mcu_rustflags(&[]));
     c
 }
 
-/// A `--config` value that maps each directory holding crates.io sources (for cargo's own
+/// `--config` and its value: the MCU target's flags `extra` and the paths trimmed
+/// ([`trimmed_registry_paths`]), in one array. Cargo joins the array with the one in
+/// `.cargo/config.toml`, but of two `--config` values for the same key only the last counts:
+/// a board that adds flags (the Nucleo's CPU) passes them here, after [`cargo`]'s. Nothing
+/// when there is nothing to add.
+pub fn mcu_rustflags(extra: &[&str]) -> Vec<String> {
+    let mut flags: Vec<String> = extra.iter().map(|f| format!("{f:?}")).collect();
+    flags.extend(trimmed_registry_paths().unwrap_or_default());
+    if flags.is_empty() {
+        return vec![];
+    }
+    vec![
+        "--config".to_string(),
+        format!("target.{TARGET}.rustflags=[{}]", flags.join(", ")),
+    ]
+}
+
+/// The `rustc` flags (TOML strings, quoted) that map each directory holding crates.io sources (for cargo's own
 /// registry `$CARGO_HOME/registry/src/<index>/`, or a vendor directory) to nothing in the
 /// MCU target's file paths (`rustc --remap-path-prefix`): a panic location in a dependency
 /// then reads `rmodbus-0.13.0/src/lib.rs`, not the builder's home directory. The images are
@@ -30,8 +45,8 @@ pub fn cargo() -> Command {
 /// those under `$CARGO_HOME/registry/src`; the flags are added to the target's from
 /// `.cargo/config.toml` (cargo joins the arrays). `None`, with a warning, if none is found or
 /// one is not UTF-8 (the images then carry the full paths, ≈ 0.4 KB more).
-pub fn trimmed_registry_paths() -> Option<String> {
-    static CONFIG: std::sync::OnceLock<Option<String>> = std::sync::OnceLock::new();
+pub fn trimmed_registry_paths() -> Option<Vec<String>> {
+    static CONFIG: std::sync::OnceLock<Option<Vec<String>>> = std::sync::OnceLock::new();
     CONFIG
         .get_or_init(|| {
             let mut dirs = registry_dirs();
@@ -51,7 +66,7 @@ pub fn trimmed_registry_paths() -> Option<String> {
                     serde_json::to_string(&format!("--remap-path-prefix={}/=", d.to_str()?)).ok()
                 })
                 .collect();
-            Some(format!("target.{TARGET}.rustflags=[{}]", flags.join(", ")))
+            Some(flags)
         })
         .clone()
 }
@@ -210,12 +225,16 @@ mod tests {
                 .starts_with("rmodbus-"))),
             "{dirs:?}"
         );
-        let config = trimmed_registry_paths().unwrap();
-        assert!(
-            config.starts_with("target.thumbv7em-none-eabihf.rustflags=[\"--remap-path-prefix=")
-        );
+        let flags = trimmed_registry_paths().unwrap();
         for d in &dirs {
-            assert!(config.contains(&format!("{}/=", d.display())), "{config}");
+            let flag = format!("\"--remap-path-prefix={}/=\"", d.display());
+            assert!(flags.contains(&flag), "{flags:?}");
         }
+        // One array with a board's own flags: cargo keeps only the last `--config` of a key.
+        let config = mcu_rustflags(&["-C", "target-cpu=cortex-m4"]);
+        assert_eq!(config[0], "--config");
+        assert!(config[1].starts_with(
+            "target.thumbv7em-none-eabihf.rustflags=[\"-C\", \"target-cpu=cortex-m4\", \"--remap-path-prefix="
+        ));
     }
 }
