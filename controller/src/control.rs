@@ -221,16 +221,12 @@ impl Follow {
     /// every sample, so that the 1 ms step holds only the call.
     #[inline(never)]
     fn sample(&mut self, on: bool, offs: u16, network: f32, in_span: Option<f32>) -> f32 {
-        if !on && self.map.is_none() && offs == self.offs_seen {
-            return network;
-        }
         if !on || offs != self.offs_seen {
             self.forget();
             self.offs_seen = offs;
-        }
-        self.pending = None;
-        if !on {
-            return network;
+            if !on {
+                return network;
+            }
         }
         self.fallback_left = self.fallback_left.saturating_sub(1);
         if self.map.is_none() {
@@ -1232,14 +1228,20 @@ mod tests {
         assert!((a - 1.3).abs() < 0.05 && b.abs() < 0.5, "learnt ({a}, {b})");
     }
 
-    /// Turned off, the map is forgotten: turned on again, it starts at the identity.
-    #[test]
-    fn turning_it_off_forgets_the_map() {
+    /// A `Follow` whose map has learnt a plant 1.3 times the network over 400 samples.
+    fn learnt() -> Follow {
         let mut f = Follow::new(S, TS);
         for k in 0..400 {
             f.sample(true, 0, network(k), Some(1.3 * network(k)));
             f.settle(true);
         }
+        f
+    }
+
+    /// Turned off, the map is forgotten: turned on again, it starts at the identity.
+    #[test]
+    fn turning_it_off_forgets_the_map() {
+        let mut f = learnt();
         assert_ne!(f.sample(true, 0, 2.5, None), 2.5, "a map learnt");
         assert_eq!(f.sample(false, 0, 2.5, Some(4.0)), 2.5);
         f.settle(false);
@@ -1250,11 +1252,7 @@ mod tests {
     /// A reading waiting for the next tick when following is turned off is not taken.
     #[test]
     fn a_pending_reading_is_dropped_when_turned_off() {
-        let mut f = Follow::new(S, TS);
-        for k in 0..400 {
-            f.sample(true, 0, network(k), Some(1.3 * network(k)));
-            f.settle(true);
-        }
+        let mut f = learnt();
         let before = f.map.as_ref().unwrap().gain_offset();
         f.sample(true, 0, 2.5, Some(9.0));
         f.settle(false);

@@ -36,26 +36,21 @@ pub fn mcu_rustflags(extra: &[&str]) -> Vec<String> {
     ]
 }
 
-/// The `rustc` flags (TOML strings, quoted) that map each directory holding crates.io sources (for cargo's own
-/// registry `$CARGO_HOME/registry/src/<index>/`, or a vendor directory) to nothing in the
-/// MCU target's file paths (`rustc --remap-path-prefix`): a panic location in a dependency
-/// then reads `rmodbus-0.13.0/src/lib.rs`, not the builder's home directory. The images are
-/// the same bytes whoever builds them, and ≈ 0.4 KB smaller (each path was ≈ 60 bytes of
-/// flash). The directories are where `cargo metadata` (offline) finds the MCU's packages, else
-/// those under `$CARGO_HOME/registry/src`; the flags are added to the target's from
-/// `.cargo/config.toml` (cargo joins the arrays). `None`, with a warning, if none is found or
-/// one is not UTF-8 (the images then carry the full paths, ≈ 0.4 KB more).
+/// The `rustc` flags (TOML strings, quoted) that map each of cargo's registry source
+/// directories, `$CARGO_HOME/registry/src/<index>/`, to nothing in the MCU target's file
+/// paths (`rustc --remap-path-prefix`): a panic location in a dependency then reads
+/// `rmodbus-0.13.0/src/lib.rs`, not the builder's home directory. The images are the same
+/// bytes whoever builds them, and ≈ 0.4 KB smaller (each path was ≈ 60 bytes of flash);
+/// [`mcu_rustflags`] puts them in the target's flags. `None`, with a warning, if none is
+/// found or one is not UTF-8 (the images then carry the full paths, ≈ 0.4 KB more).
 pub fn trimmed_registry_paths() -> Option<Vec<String>> {
     static CONFIG: std::sync::OnceLock<Option<Vec<String>>> = std::sync::OnceLock::new();
     CONFIG
         .get_or_init(|| {
-            let mut dirs = registry_dirs();
-            if dirs.is_empty() {
-                dirs = registry_src_dirs();
-            }
+            let dirs = registry_src_dirs();
             if dirs.is_empty() || dirs.iter().any(|d| d.to_str().is_none()) {
                 eprintln!(
-                    "warning: no crates.io source directory found, or one not UTF-8 (cargo metadata, $CARGO_HOME/registry/src): the MCU images keep their dependencies' full paths (≈ 0.4 KB of flash)"
+                    "warning: no crates.io source directory found, or one not UTF-8 ($CARGO_HOME/registry/src): the MCU images keep their dependencies' full paths (≈ 0.4 KB of flash)"
                 );
                 return None;
             }
@@ -71,46 +66,14 @@ pub fn trimmed_registry_paths() -> Option<Vec<String>> {
         .clone()
 }
 
-/// The directories holding the MCU's crates.io packages (each package's directory's parent),
-/// from `cargo metadata`, offline (nothing downloaded for other platforms); empty if it fails.
-fn registry_dirs() -> Vec<PathBuf> {
-    let out = Command::new(std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into()))
-        .args(["metadata", "--format-version", "1", "--offline", "--locked"])
-        .args(["--filter-platform", TARGET])
-        .current_dir(root())
-        .output();
-    let Some(json) = out
-        .ok()
-        .filter(|o| o.status.success())
-        .and_then(|o| serde_json::from_slice::<serde_json::Value>(&o.stdout).ok())
-    else {
-        return vec![];
-    };
-    let mut dirs: Vec<PathBuf> = json["packages"]
-        .as_array()
-        .into_iter()
-        .flatten()
-        .filter(|p| {
-            p["source"]
-                .as_str()
-                .is_some_and(|s| s.starts_with("registry+"))
-        })
-        .filter_map(|p| {
-            let manifest = Path::new(p["manifest_path"].as_str()?);
-            Some(manifest.parent()?.parent()?.to_path_buf())
-        })
-        .collect();
-    dirs.sort();
-    dirs.dedup();
-    dirs
-}
-
 /// The directories under `$CARGO_HOME/registry/src` (cargo's home: `CARGO_HOME`, else
 /// `$HOME/.cargo`); empty if there is none.
 fn registry_src_dirs() -> Vec<PathBuf> {
+    // Absolute, as cargo makes a relative `CARGO_HOME` (and as it gives rustc the paths).
     let Some(home) = std::env::var_os("CARGO_HOME")
         .map(PathBuf::from)
         .or_else(|| std::env::var_os("HOME").map(|h| Path::new(&h).join(".cargo")))
+        .and_then(|h| std::path::absolute(h).ok())
     else {
         return vec![];
     };
@@ -214,9 +177,7 @@ mod tests {
     /// `--config` value names each as a TOML string.
     #[test]
     fn registry_paths_are_trimmed() {
-        let dirs = registry_dirs();
-        let src = registry_src_dirs();
-        assert!(dirs.iter().all(|d| src.contains(d)), "{dirs:?} in {src:?}");
+        let dirs = registry_src_dirs();
         assert!(
             dirs.iter().any(|d| std::fs::read_dir(d).unwrap().any(|e| e
                 .unwrap()
