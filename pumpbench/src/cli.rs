@@ -263,7 +263,9 @@ pub struct SimulateArgs {
     /// prediction of the reading taken back through that first-order lag, x = y + τ·dy/dt
     /// (model_core::transmitter::unlag; the seed rows echoed as they are). The model is
     /// identified on, and its map follows, the readings: this is for comparing it with the
-    /// process value (a bench's truth). Default: the prediction of the reading.
+    /// process value (a bench's truth). Default: the lag `identify` found from the training
+    /// record's speed, when the model file holds a trusted one (`transmitter`), else none:
+    /// the prediction of the reading. 0: the prediction of the reading.
     #[arg(long, value_name = "MS", allow_hyphen_values = true)]
     pub sensor_lag_ms: Option<String>,
 }

@@ -23,6 +23,7 @@ mod observe;
 mod output;
 mod plant;
 mod plots;
+mod sensorlag;
 mod simulate;
 mod study;
 mod train;

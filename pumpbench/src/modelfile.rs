@@ -108,6 +108,18 @@ pub struct Training {
     pub tool: String,
 }
 
+/// The transmitter's lag as `identify` found it from the record's speed
+/// ([`crate::sensorlag`]).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct TransmitterFile {
+    /// The lag's time constant, s (0..=2).
+    pub lag_s: f64,
+    /// The lagged static fit's mismatch, % of the reading's standard deviation.
+    pub mismatch_pct: f64,
+    /// Whether `simulate` takes the prediction back through the lag by default.
+    pub trusted: bool,
+}
+
 /// A model file.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ModelFile {
@@ -135,6 +147,10 @@ pub struct ModelFile {
     pub y_range: [f64; 2],
     /// Training metadata.
     pub training: Training,
+    /// The transmitter's lag behind the speed, when the training record had `speed_rpm`
+    /// (absent in files written before it existed, and in the shipped models).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub transmitter: Option<TransmitterFile>,
 }
 
 fn bad(path: &Path, message: String) -> Failure {
@@ -191,6 +207,17 @@ impl ModelFile {
         }
         if !(m.sample_period_s.is_finite() && m.sample_period_s > 0.0) {
             return Err(bad(path, "sample_period_s must be > 0".into()));
+        }
+        if let Some(t) = m.transmitter {
+            if !(0.0..=crate::sensorlag::LAG_MAX_S).contains(&t.lag_s) || !(t.mismatch_pct >= 0.0) {
+                return Err(bad(
+                    path,
+                    format!(
+                        "transmitter: lag_s must be within 0..={} s and mismatch_pct >= 0",
+                        Short(crate::sensorlag::LAG_MAX_S)
+                    ),
+                ));
+            }
         }
         // Every value must survive the firmware's arithmetic: f32, and the fixed-point form.
         let scalars = [

@@ -3,8 +3,8 @@
 use crate::error::Failure;
 use crate::input::{read_series, Series};
 use crate::modelfile::{
-    in_firmware_range, HostNarxQ15, LagsFile, ModelFile, ScalingFile, Target, Training, FORMAT,
-    MAX_ABS_VALUE,
+    in_firmware_range, HostNarxQ15, LagsFile, ModelFile, ScalingFile, Target, Training,
+    TransmitterFile, FORMAT, MAX_ABS_VALUE,
 };
 use crate::num::Short;
 use crate::train::{identify, Data, Structure};
@@ -181,6 +181,7 @@ pub fn run_identify(o: &Identify) -> Result<ModelFile, Failure> {
             seconds,
             tool: format!("pumpbench {}", env!("CARGO_PKG_VERSION")),
         },
+        transmitter: transmitter_lag(o.data, o.target),
     };
     eprintln!(
         "identify: {} epochs in {seconds:.2} s, criterion {:.4e} -> {:.4e} ({})",
@@ -190,6 +191,57 @@ pub fn run_identify(o: &Identify) -> Result<ModelFile, Failure> {
         trained.stop
     );
     Ok(file)
+}
+
+/// The transmitter's lag behind the speed in the training record ([`crate::sensorlag`]),
+/// said on stderr; `None` (and why, on stderr) when the record has no `speed_rpm` or the lag
+/// cannot be seen. Never fails identify: the model is the same with or without it.
+fn transmitter_lag(data: &Path, target: Target) -> Option<TransmitterFile> {
+    let column = target.column();
+    let say = |m: String| eprintln!("identify: {m}");
+    let rec = match crate::input::read_gappy_series(data, &[], &[column, "speed_rpm"]) {
+        Ok(r) => r,
+        Err(e) => {
+            say(format!("no transmitter lag estimated: {e}"));
+            return None;
+        }
+    };
+    let (Some(y), Some(w)) = (&rec.columns[0], &rec.columns[1]) else {
+        say(format!(
+            "no speed_rpm column: the {column} transmitter's lag is not estimated (simulate gives the reading unless --sensor-lag-ms is given)"
+        ));
+        return None;
+    };
+    let mut t = Vec::new();
+    let mut speed = Vec::new();
+    let mut reading = Vec::new();
+    for k in 0..rec.input.t_s.len() {
+        if let (Some(yk), Some(wk)) = (y[k], w[k]) {
+            t.push(rec.input.t_s[k]);
+            speed.push(wk);
+            reading.push(yk);
+        } else if y[k].is_some() {
+            say(format!(
+                "a {column} sample without speed_rpm (line {}): the transmitter's lag is not estimated",
+                rec.lines[k]
+            ));
+            return None;
+        }
+    }
+    match crate::sensorlag::estimate(&t, &speed, &reading) {
+        Ok(e) => {
+            say(e.describe(column));
+            Some(TransmitterFile {
+                lag_s: e.lag_s,
+                mismatch_pct: e.mismatch_pct,
+                trusted: e.trusted,
+            })
+        }
+        Err(e) => {
+            say(format!("no transmitter lag estimated: {e}"));
+            None
+        }
+    }
 }
 
 /// Writes a model file (pretty JSON and a final newline), complete or not at all.
@@ -351,8 +403,9 @@ pub fn quantized(m: &ModelFile) -> Result<HostNarxQ15, Failure> {
 }
 
 /// `simulate --model narmax`: the free run, alone or (`adapt_tau_s`) with the output map
-/// fitted on line to the series' measurements; with `sensor_lag_s`, taken back through the
-/// transmitter's lag ([`unlagged`]).
+/// fitted on line to the series' measurements; taken back through the transmitter's lag
+/// ([`unlagged`]) of `sensor_lag_s` if given, else of the model file's trusted estimate
+/// (`identify`'s, [`crate::sensorlag`]), else left as the prediction of the reading.
 pub fn simulate<M: Predictor>(
     model: &M,
     m: &ModelFile,
@@ -365,11 +418,26 @@ pub fn simulate<M: Predictor>(
         None => free_run(model, series)?,
         Some(tau) => free_run_adapted(model, m, series, tau)?,
     };
-    if adapt_tau_s.is_some() && sensor_lag_s.is_none() {
-        eprintln!(
-            "pumpbench: the output predicts the transmitter's reading; --sensor-lag-ms (its time constant) gives the process value before it"
-        );
-    }
+    let from_file = m.transmitter.filter(|t| t.trusted).map(|t| t.lag_s);
+    let sensor_lag_s = match (sensor_lag_s, from_file) {
+        (Some(given), _) => Some(given),
+        (None, Some(lag)) => {
+            eprintln!(
+                "pumpbench: the output is the process value: the prediction taken back through the {} transmitter's lag of {} ms that identify found (--sensor-lag-ms 0 gives the reading)",
+                m.target.column(),
+                Short(lag * 1e3)
+            );
+            Some(lag)
+        }
+        (None, None) => {
+            if adapt_tau_s.is_some() {
+                eprintln!(
+                    "pumpbench: the output predicts the transmitter's reading; --sensor-lag-ms (its time constant) gives the process value before it"
+                );
+            }
+            None
+        }
+    };
     if let Some(tau) = sensor_lag_s {
         let seeded = if series.y.is_some() {
             model.lags().max_lag().min(y.len())
