@@ -114,6 +114,10 @@ pub struct Training {
 pub struct TransmitterFile {
     /// The lag's time constant, s (0..=2).
     pub lag_s: f64,
+    /// The lag found at the lower half of the record's speeds alone, s.
+    pub low_speed_lag_s: f64,
+    /// The lag found at the upper half of the record's speeds alone, s.
+    pub high_speed_lag_s: f64,
     /// The lagged static fit's mismatch, % of the reading's standard deviation.
     pub mismatch_pct: f64,
     /// Whether `simulate` takes the prediction back through the lag by default.
@@ -209,11 +213,16 @@ impl ModelFile {
             return Err(bad(path, "sample_period_s must be > 0".into()));
         }
         if let Some(t) = m.transmitter {
-            if !(0.0..=crate::sensorlag::LAG_MAX_S).contains(&t.lag_s) || !(t.mismatch_pct >= 0.0) {
+            let lag = 0.0..=crate::sensorlag::LAG_MAX_S;
+            if ![t.lag_s, t.low_speed_lag_s, t.high_speed_lag_s]
+                .iter()
+                .all(|l| lag.contains(l))
+                || !(t.mismatch_pct >= 0.0)
+            {
                 return Err(bad(
                     path,
                     format!(
-                        "transmitter: lag_s must be within 0..={} s and mismatch_pct >= 0",
+                        "transmitter: the lags must be within 0..={} s and mismatch_pct >= 0",
                         Short(crate::sensorlag::LAG_MAX_S)
                     ),
                 ));

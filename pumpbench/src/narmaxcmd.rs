@@ -212,27 +212,37 @@ fn transmitter_lag(data: &Path, target: Target) -> Option<TransmitterFile> {
         ));
         return None;
     };
-    let mut t = Vec::new();
-    let mut speed = Vec::new();
-    let mut reading = Vec::new();
+    // The rows with both a reading and a finite speed; a few without a speed (a VFD read
+    // that failed: an empty cell in the controller's record) are left out, the lag taken
+    // across them.
+    let (mut t, mut speed, mut reading) = (Vec::new(), Vec::new(), Vec::new());
+    let mut without = 0usize;
     for k in 0..rec.input.t_s.len() {
-        if let (Some(yk), Some(wk)) = (y[k], w[k]) {
-            t.push(rec.input.t_s[k]);
-            speed.push(wk);
-            reading.push(yk);
-        } else if y[k].is_some() {
-            say(format!(
-                "a {column} sample without speed_rpm (line {}): the transmitter's lag is not estimated",
-                rec.lines[k]
-            ));
-            return None;
+        match (y[k], w[k]) {
+            (Some(yk), Some(wk)) if yk.is_finite() && wk.is_finite() => {
+                t.push(rec.input.t_s[k]);
+                speed.push(wk);
+                reading.push(yk);
+            }
+            (Some(_), _) => without += 1,
+            (None, _) => {}
         }
+    }
+    let with = reading.len();
+    if without * 100 > with + without {
+        say(format!(
+            "{without} of {} {column} samples have no finite speed_rpm (over 1 %): the transmitter's lag is not estimated",
+            with + without
+        ));
+        return None;
     }
     match crate::sensorlag::estimate(&t, &speed, &reading) {
         Ok(e) => {
             say(e.describe(column));
             Some(TransmitterFile {
                 lag_s: e.lag_s,
+                low_speed_lag_s: e.low_speed_lag_s,
+                high_speed_lag_s: e.high_speed_lag_s,
                 mismatch_pct: e.mismatch_pct,
                 trusted: e.trusted,
             })
@@ -425,7 +435,7 @@ pub fn simulate<M: Predictor>(
             eprintln!(
                 "pumpbench: the output is the process value: the prediction taken back through the {} transmitter's lag of {} ms that identify found (--sensor-lag-ms 0 gives the reading)",
                 m.target.column(),
-                Short(lag * 1e3)
+                Short((lag * 1e6).round() / 1e3)
             );
             Some(lag)
         }
