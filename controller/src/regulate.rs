@@ -478,13 +478,19 @@ impl Regulator {
             Controlled::Flow => s.flow_lag_s,
         };
         // With the model, a plant that lags more than the defaults cover is taken at least as
-        // calmly as the lag measured asks of the defaults (settings calmer still stand).
+        // calmly as the lag measured asks of the defaults (settings calmer still stand); with
+        // nothing measured beyond the defaults, the setting as it is, below the default too.
         let lag_s = if plant.is_some() {
             let default = match self.controlled {
                 Controlled::Pressure => ControlSettings::DEFAULT.pressure_lag_s,
                 Controlled::Flow => ControlSettings::DEFAULT.flow_lag_s,
             };
-            lag_s.max(default * self.calm())
+            let calm = self.calm();
+            if calm > 1.0 {
+                lag_s.max(default * calm)
+            } else {
+                lag_s
+            }
         } else {
             lag_s
         };
@@ -596,7 +602,13 @@ impl Regulator {
         // A plant that lags more than the model is asked for no faster a loop than twice
         // that lag.
         let (asked, default) = c.closed_loop_s(s);
-        let lambda = asked.max(default * self.calm());
+        // With nothing measured beyond the defaults, λ as asked, below the default too.
+        let calm = self.calm();
+        let lambda = if calm > 1.0 {
+            asked.max(default * calm)
+        } else {
+            asked
+        };
         (
             inv.torque_ref_pct,
             tau * rate / gain,
@@ -883,6 +895,30 @@ mod tests {
             "{free:?} {calm:?}"
         );
         assert_eq!(gains(COVERED_LAG_PRESSURE_S), free);
+    }
+
+    /// A λ asked below the default is the λ used (a regression: the calm rule floored it at
+    /// the default, so registers 17/18 below 200/300 ms did nothing in the model law); with a
+    /// lag measured beyond the defaults, at least the default calmed.
+    #[test]
+    fn a_lambda_below_the_default_takes_effect() {
+        let p = BenchParams::<f32>::PAPER;
+        let gains = |lag: f32, lambda: f32| {
+            let s = ControlSettings {
+                pressure_closed_loop_s: lambda,
+                ..ControlSettings::DEFAULT
+            };
+            let mut r = Regulator::new(Controlled::Pressure, 3.0, 50.0, 1300.0).with_lag(lag);
+            r.model_terms(&p, paper_load(&p), &s, 0.0).2
+        };
+        let default = ControlSettings::DEFAULT.pressure_closed_loop_s;
+        let (at_default, faster) = (gains(0.0, default), gains(0.0, default / 2.0));
+        assert!((faster.kc / at_default.kc - 2.0).abs() < 1e-3, "{faster:?}");
+        let calmed = gains(2.0 * COVERED_LAG_PRESSURE_S, default / 2.0);
+        assert!(
+            (at_default.kc / calmed.kc - CALM_MAX).abs() < 1e-3,
+            "{calmed:?}"
+        );
     }
 
     /// The loop calms with the lag it measured: not below what the defaults cover, then as
