@@ -112,8 +112,10 @@ pub struct Training {
 /// ([`crate::sensorlag`]).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct TransmitterFile {
-    /// The lag's time constant, s (0..=2).
+    /// The transmitter's lag, s (0..=2): the one `simulate` uses.
     pub lag_s: f64,
+    /// The lag of the reading behind the speed over the whole record, s (0..=2).
+    pub found_lag_s: f64,
     /// The lag found at the lower half of the record's speeds alone, s.
     pub low_speed_lag_s: f64,
     /// The lag found at the upper half of the record's speeds alone, s.
@@ -214,9 +216,14 @@ impl ModelFile {
         }
         if let Some(t) = m.transmitter {
             let lag = 0.0..=crate::sensorlag::LAG_MAX_S;
-            if ![t.lag_s, t.low_speed_lag_s, t.high_speed_lag_s]
-                .iter()
-                .all(|l| lag.contains(l))
+            if ![
+                t.lag_s,
+                t.found_lag_s,
+                t.low_speed_lag_s,
+                t.high_speed_lag_s,
+            ]
+            .iter()
+            .all(|l| lag.contains(l))
                 || !(t.mismatch_pct >= 0.0)
             {
                 return Err(bad(

@@ -241,6 +241,7 @@ fn transmitter_lag(data: &Path, target: Target) -> Option<TransmitterFile> {
             say(e.describe(column));
             Some(TransmitterFile {
                 lag_s: e.lag_s,
+                found_lag_s: e.found_lag_s,
                 low_speed_lag_s: e.low_speed_lag_s,
                 high_speed_lag_s: e.high_speed_lag_s,
                 mismatch_pct: e.mismatch_pct,
