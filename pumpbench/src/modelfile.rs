@@ -122,6 +122,10 @@ pub struct TransmitterFile {
     pub high_speed_lag_s: f64,
     /// The lagged static fit's mismatch, % of the reading's standard deviation.
     pub mismatch_pct: f64,
+    /// The share of the reading's variance the lagged static fit explains, % (≤ 100).
+    /// Absent in files written before it existed.
+    #[serde(default)]
+    pub explained_pct: f64,
     /// Whether `simulate` takes the prediction back through the lag by default.
     pub trusted: bool,
 }

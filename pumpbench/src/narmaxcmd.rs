@@ -231,7 +231,7 @@ fn transmitter_lag(data: &Path, target: Target) -> Option<TransmitterFile> {
     let with = reading.len();
     if without * 100 > with + without {
         say(format!(
-            "{without} of {} {column} samples have no finite speed_rpm (over 1 %): the transmitter's lag is not estimated",
+            "{without} of {} {column} samples have no finite speed_rpm, or are not finite themselves (over 1 %): the transmitter's lag is not estimated",
             with + without
         ));
         return None;
@@ -245,6 +245,7 @@ fn transmitter_lag(data: &Path, target: Target) -> Option<TransmitterFile> {
                 low_speed_lag_s: e.low_speed_lag_s,
                 high_speed_lag_s: e.high_speed_lag_s,
                 mismatch_pct: e.mismatch_pct,
+                explained_pct: e.explained_pct,
                 trusted: e.trusted,
             })
         }
@@ -429,7 +430,11 @@ pub fn simulate<M: Predictor>(
         None => free_run(model, series)?,
         Some(tau) => free_run_adapted(model, m, series, tau)?,
     };
-    let from_file = m.transmitter.filter(|t| t.trusted).map(|t| t.lag_s);
+    // A trusted lag of 0 is the reading itself: nothing to take back, nothing to say.
+    let from_file = m
+        .transmitter
+        .filter(|t| t.trusted && t.lag_s > 0.0)
+        .map(|t| t.lag_s);
     let sensor_lag_s = match (sensor_lag_s, from_file) {
         (Some(given), _) => Some(given),
         (None, Some(lag)) => {
