@@ -61,7 +61,10 @@ pub enum Command {
     /// the input's normalised auto-covariance at lags 1..10 goes to stderr.
     Excite(ExciteArgs),
     /// Identify a neural NARX/NARMAX model (NNSYSID nnarx/nnarmax2 semantics, LM) from a
-    /// uniformly sampled record; writes a model file (JSON).
+    /// uniformly sampled record; writes a model file (JSON). With a `speed_rpm` column (the
+    /// drive's speed; the valve fixed), it also finds the transmitter's lag behind the speed,
+    /// a water column's part taken out, and writes it to the file: `simulate` takes the
+    /// model's prediction back through it (docs/narmax.md).
     Identify(IdentifyArgs),
     /// Free-run MAPE_d of a NARMAX model on a record (seed rows skipped, paper eq. 1) and,
     /// with --static, MAPE_s on steady-state points (eq. 2).
@@ -326,7 +329,8 @@ pub struct ExciteArgs {
 /// Options of `pumpbench identify` (their documentation is their help text).
 #[derive(Args)]
 pub struct IdentifyArgs {
-    /// Training data: header with t_s, torque_ref_pct and the target's column.
+    /// Training data: header with t_s, torque_ref_pct and the target's column; optionally
+    /// speed_rpm (the transmitter's lag).
     #[arg(long)]
     pub data: PathBuf,
     /// Output to model.
