@@ -485,12 +485,7 @@ impl Regulator {
                 Controlled::Pressure => ControlSettings::DEFAULT.pressure_lag_s,
                 Controlled::Flow => ControlSettings::DEFAULT.flow_lag_s,
             };
-            let calm = self.calm();
-            if calm > 1.0 {
-                lag_s.max(default * calm)
-            } else {
-                lag_s
-            }
+            self.calmed(lag_s, default)
         } else {
             lag_s
         };
@@ -560,6 +555,19 @@ impl Regulator {
         self.probe.calm
     }
 
+    /// A setting (`value`, whose default is `default`) as the lag measured asks: as it is up
+    /// to the lag the defaults cover, beyond at least the default calmed (settings calmer
+    /// still stand). One rule for λ and the lag the error assumes.
+    #[inline(always)]
+    fn calmed(&self, value: f32, default: f32) -> f32 {
+        let calm = self.calm();
+        if calm > 1.0 {
+            value.max(default * calm)
+        } else {
+            value
+        }
+    }
+
     /// The static feedforward, its lead and the scheduled gains at the reference now. A load
     /// that moved since the last period (the observer's estimate) enters bumplessly: the
     /// feedforward's change from it goes out of the integral, so only the reference's motion
@@ -606,11 +614,7 @@ impl Regulator {
         // beyond what the defaults cover at least the default calmed (a review: λ = 60 ms on
         // a plant lagging 95 ms overshot 41 %).
         let floor = 2.0 * self.probe.lag_s;
-        let mut lambda = if asked > floor { asked } else { floor };
-        let calm = self.calm();
-        if calm > 1.0 {
-            lambda = lambda.max(default * calm);
-        }
+        let lambda = self.calmed(if asked > floor { asked } else { floor }, default);
         (
             inv.torque_ref_pct,
             tau * rate / gain,

@@ -90,8 +90,6 @@ pub struct LagEstimate {
     pub high_speed_lag_s: f64,
     /// The fit's mismatch at that lag, % of the reading's standard deviation (0..).
     pub mismatch_pct: f64,
-    /// The residual's RMS at that lag, the reading's unit.
-    pub residual_rms: f64,
     /// The share of the reading's variance the lagged static fit explains, % (≤ 100).
     pub explained_pct: f64,
     /// Whether `simulate` may use it: the fit explains ≥ [`EXPLAINED_MIN_PCT`] of the
@@ -211,6 +209,11 @@ fn grid_s(j: usize) -> f64 {
     j as f64 * GRID_MS / 1e3
 }
 
+/// Row `k` of the lagged basis.
+fn row(cols: &[Vec<f64>; 4], k: usize) -> nalgebra::Vector4<f64> {
+    nalgebra::Vector4::new(cols[0][k], cols[1][k], cols[2][k], cols[3][k])
+}
+
 /// Estimates the lag of `reading` behind the static function of `speed_rpm` (rows at times
 /// `t_s`, s, strictly increasing; the three of one length). The valve must be fixed over the
 /// record (identify's record is).
@@ -237,19 +240,24 @@ pub fn estimate(
     let median = sorted[n / 2];
     let low: Vec<bool> = speed_rpm.iter().map(|&w| w < median).collect();
     let mut cols: [Vec<f64>; 4] = core::array::from_fn(|_| vec![0.0; n]);
-    // Sums of squares at grid point j: the whole record, its low half, its high half.
-    let mut sse_at = |j: usize| -> [f64; 3] {
+    // The basis lagged by grid point j, into `cols`.
+    let lag_basis = |j: usize, cols: &mut [Vec<f64>; 4]| {
         for (col, x) in cols.iter_mut().zip(&basis) {
             lag_foh(x, t_s, grid_s(j), col);
         }
+    };
+    // The fits at grid point j: the whole record, its low half, its high half.
+    let mut fits_at = |j: usize| -> [Normal; 3] {
+        lag_basis(j, &mut cols);
         let mut eq = [Normal::new(); 3];
         for k in 0..n {
-            let r = nalgebra::Vector4::new(cols[0][k], cols[1][k], cols[2][k], cols[3][k]);
+            let r = row(&cols, k);
             eq[0].add(&r, reading[k]);
             eq[if low[k] { 1 } else { 2 }].add(&r, reading[k]);
         }
-        eq.map(|e| e.solve().map_or(f64::INFINITY, |(_, sse)| sse))
+        eq
     };
+    let mut sse_at = |j: usize| fits_at(j).map(|e| e.solve().map_or(f64::INFINITY, |(_, sse)| sse));
     let last = (LAG_MAX_S * 1e3 / GRID_MS).round() as usize;
     // Coarse, then fine around each part's coarse best.
     let mut coarse = [(0usize, f64::INFINITY); 3];
@@ -292,21 +300,8 @@ pub fn estimate(
         return Err(NoEstimate::Flat);
     }
     // The residual at the best lag, for its covariance at one sample.
-    for (col, x) in cols.iter_mut().zip(&basis) {
-        lag_foh(x, t_s, grid_s(j), col);
-    }
-    let mut eq = Normal::new();
-    for k in 0..n {
-        let r = nalgebra::Vector4::new(cols[0][k], cols[1][k], cols[2][k], cols[3][k]);
-        eq.add(&r, reading[k]);
-    }
-    let (c, _) = eq.solve().ok_or(NoEstimate::Flat)?;
-    let e: Vec<f64> = (0..n)
-        .map(|k| {
-            reading[k]
-                - (c[0] * cols[0][k] + c[1] * cols[1][k] + c[2] * cols[2][k] + c[3] * cols[3][k])
-        })
-        .collect();
+    let (c, _) = fits_at(j)[0].solve().ok_or(NoEstimate::Flat)?;
+    let e: Vec<f64> = (0..n).map(|k| reading[k] - row(&cols, k).dot(&c)).collect();
     let cov1 = e.windows(2).map(|p| p[0] * p[1]).sum::<f64>() / (n - 1) as f64;
     let mismatch_pct = 100.0 * cov1.max(0.0).sqrt() / ys;
     let (found, low_s, high_s) = (grid_s(j), grid_s(j_low), grid_s(j_high));
@@ -325,7 +320,6 @@ pub fn estimate(
         low_speed_lag_s: low_s,
         high_speed_lag_s: high_s,
         mismatch_pct,
-        residual_rms: (sse / n as f64).sqrt(),
         explained_pct,
         trusted: halves_fit
             && explained_pct >= EXPLAINED_MIN_PCT

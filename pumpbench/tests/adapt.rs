@@ -211,12 +211,17 @@ fn check(what: &str, [off, q15, f64_]: [Vec<f64>; 3], missed: &[usize]) {
     );
 }
 
+/// The `transmitter` entry `identify` wrote in the model file at `path`.
+fn transmitter(path: &Path) -> serde_json::Value {
+    let text = std::fs::read_to_string(path).unwrap();
+    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    v["transmitter"].clone()
+}
+
 /// The transmitter's lag `identify` wrote in the model file of `target` in `dir`: (lag, ms;
 /// trusted).
 fn file_lag(dir: &Path, target: &str) -> (f64, bool) {
-    let text = std::fs::read_to_string(dir.join(format!("{target}_m.json"))).unwrap();
-    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
-    let t = &v["transmitter"];
+    let t = transmitter(&dir.join(format!("{target}_m.json")));
     (
         t["lag_s"].as_f64().unwrap() * 1e3,
         t["trusted"].as_bool().unwrap(),
@@ -255,42 +260,37 @@ fn the_output_map_follows_the_valve_pressure_and_flow() {
     // By default, taken back through the transmitter's lag that identify found from the
     // record's speed (bench-data's pressure transmitter: 20 ms; flow: 40 ms): every segment
     // meets, the ×0.7 one too; and so with the stated lag.
-    let pressure_lag: &[&str] = &["--sensor-lag-ms", "20"];
-    let [reading, default, stated] = case(
-        dir.path(),
-        &bench,
-        "pressure",
-        "50",
-        ["6", "6", "7"],
-        901,
-        &[READING, &[], pressure_lag],
-    )
-    .try_into()
-    .unwrap();
-    let (lag, trusted) = file_lag(dir.path(), "pressure");
-    println!("pressure transmitter: 20 ms, identify found {lag:.1} ms");
-    assert!(trusted && (lag - 20.0).abs() <= 3.0, "{lag} ms");
-    check("pressure, the reading", reading, &[3]);
-    check("pressure, identify's lag", default, &[]);
-    check("pressure, --sensor-lag-ms 20", stated, &[]);
-    let flow_lag: &[&str] = &["--sensor-lag-ms", "40"];
-    let [reading, default, stated] = case(
-        dir.path(),
-        &bench,
-        "flow",
-        "100",
-        ["7", "7", "6"],
-        911,
-        &[READING, &[], flow_lag],
-    )
-    .try_into()
-    .unwrap();
-    let (lag, trusted) = file_lag(dir.path(), "flow");
-    println!("flow transmitter: 40 ms, identify found {lag:.1} ms");
-    assert!(trusted && (lag - 40.0).abs() <= 5.0, "{lag} ms");
-    check("flow, the reading", reading, &[]);
-    check("flow, identify's lag", default, &[]);
-    check("flow, --sensor-lag-ms 40", stated, &[]);
+    // (target, period ms, sizes, seed, stated lag ms, the lag found within, segments the
+    // reading misses)
+    let runs = [
+        ("pressure", "50", ["6", "6", "7"], 901, "20", 3.0, &[3][..]),
+        ("flow", "100", ["7", "7", "6"], 911, "40", 5.0, &[][..]),
+    ];
+    for (target, ts, sizes, seed, stated_ms, within, reading_misses) in runs {
+        let stated_lag: &[&str] = &["--sensor-lag-ms", stated_ms];
+        let [reading, default, stated] = case(
+            dir.path(),
+            &bench,
+            target,
+            ts,
+            sizes,
+            seed,
+            &[READING, &[], stated_lag],
+        )
+        .try_into()
+        .unwrap();
+        let (lag, trusted) = file_lag(dir.path(), target);
+        println!("{target} transmitter: {stated_ms} ms, identify found {lag:.1} ms");
+        let stated_ms: f64 = stated_ms.parse().unwrap();
+        assert!(trusted && (lag - stated_ms).abs() <= within, "{lag} ms");
+        check(&format!("{target}, the reading"), reading, reading_misses);
+        check(&format!("{target}, identify's lag"), default, &[]);
+        check(
+            &format!("{target}, --sensor-lag-ms {stated_ms}"),
+            stated,
+            &[],
+        );
+    }
 }
 
 /// A slow flow transmitter (150 ms; bench D of docs/narmax.md; excitation seeds used nowhere
@@ -354,9 +354,7 @@ fn a_water_column_is_taken_apart_and_a_late_speed_refused() {
     )
     .try_into()
     .unwrap();
-    let text = std::fs::read_to_string(d.join("pressure_m.json")).unwrap();
-    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
-    let t = &v["transmitter"];
+    let t = &transmitter(&d.join("pressure_m.json"));
     let (lag, found) = (
         t["lag_s"].as_f64().unwrap() * 1e3,
         t["found_lag_s"].as_f64().unwrap() * 1e3,
@@ -410,8 +408,8 @@ fn a_water_column_is_taken_apart_and_a_late_speed_refused() {
     .unwrap();
     let err = identify(&late, &m);
     assert!(err.contains("not used"), "{err}");
-    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&m).unwrap()).unwrap();
-    assert_eq!(v["transmitter"]["trusted"], false, "{}", v["transmitter"]);
+    let late_entry = transmitter(Path::new(&m));
+    assert_eq!(late_entry["trusted"], false, "{late_entry}");
     let sim = |extra: &[&str]| {
         let line = "simulate --model narmax --precision q15 --adapt output-map --weights";
         run(&words(line, &[&m, "--input", &val])
@@ -424,8 +422,7 @@ fn a_water_column_is_taken_apart_and_a_late_speed_refused() {
     // is still found; over 1 % of them: not.
     std::fs::write(&late, with_empty_speed(&id, 1000)).unwrap();
     identify(&late, &m);
-    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&m).unwrap()).unwrap();
-    let after = &v["transmitter"];
+    let after = &transmitter(Path::new(&m));
     assert_eq!(
         (&after["lag_s"], &after["trusted"]),
         (&t["lag_s"], &t["trusted"]),
