@@ -511,6 +511,15 @@ pub struct PlantArgs {
         allow_hyphen_values = true
     )]
     pub drive_lag_ms: String,
+    /// The rotor's inertia (motor, coupling and impeller: J of the speed equation), × the
+    /// paper's (0.25..4; 1: the paper's bench, and the record's bytes).
+    #[arg(
+        long,
+        value_name = "F",
+        default_value = "1",
+        allow_hyphen_values = true
+    )]
+    pub rotor_inertia: String,
     /// First-order lag of the pressure transmitter, ms (0..2000; 0: none).
     #[arg(
         long,

@@ -22,6 +22,9 @@
 //! - the drive's torque loop: the electromagnetic torque follows Te(u) (eq. 4) through a
 //!   first-order lag.
 //!
+//! Its rotor's inertia (J of eq. 3) can be the paper's times a factor
+//! ([`Dynamics::rotor_inertia`]; another motor and impeller).
+//!
 //! The bench can differ from the paper's model: its valve coefficient k2 set to a factor of
 //! the paper's 0.1082 √mca/(l/s) at any time ([`Plant::set_valve_factor`]), and a curve error
 //! ([`CurveError`], [`true_bench`]): the true pump-head curve F_H (eq. 5, all ten α) and the
@@ -127,6 +130,8 @@ pub const LAG_MAX_MS: f64 = 2000.0;
 pub const INERTIA_MIN: f64 = 1e-3;
 /// Largest water inertia accepted, mca·s²/l.
 pub const INERTIA_MAX: f64 = 10.0;
+/// The rotor inertias accepted, × the paper's.
+pub const ROTOR_INERTIA_RANGE: (f64, f64) = (0.25, 4.0);
 
 /// A curve error: the true curves are the paper's times `1 + pct/100`, each on its own.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -153,6 +158,9 @@ pub struct Dynamics {
     pub water_inertia: f64,
     /// First-order lag of the drive's torque loop, s (0..=2 s).
     pub drive_lag_s: f64,
+    /// The rotor's inertia (motor, coupling, impeller: J of eq. 3), × the paper's
+    /// ([`ROTOR_INERTIA_RANGE`]; 1: the paper's).
+    pub rotor_inertia: f64,
 }
 
 impl Dynamics {
@@ -160,6 +168,7 @@ impl Dynamics {
     pub const NONE: Self = Self {
         water_inertia: 0.0,
         drive_lag_s: 0.0,
+        rotor_inertia: 1.0,
     };
 }
 
@@ -223,6 +232,22 @@ pub fn parse_water_inertia(text: &str) -> Result<f64, String> {
     }
 }
 
+/// Parses `--rotor-inertia F` (× the paper's J): finite, within [`ROTOR_INERTIA_RANGE`].
+pub fn parse_rotor_inertia(text: &str) -> Result<f64, String> {
+    let f = finite("--rotor-inertia", text)?;
+    let (lo, hi) = ROTOR_INERTIA_RANGE;
+    if (lo..=hi).contains(&f) {
+        Ok(f)
+    } else {
+        Err(format!(
+            "--rotor-inertia {}: must be within {}..{} × the paper's",
+            Short(f),
+            Short(lo),
+            Short(hi)
+        ))
+    }
+}
+
 /// Parses a transmitter lag in ms (`option` names it in the message): finite, within
 /// 0..=[`LAG_MAX_MS`]. Returns seconds.
 pub fn parse_lag_ms(option: &str, text: &str) -> Result<f64, String> {
@@ -241,14 +266,16 @@ pub fn parse_lag_ms(option: &str, text: &str) -> Result<f64, String> {
 
 /// The true bench for a curve error: the paper's parameters with every α (pump head F_H,
 /// eq. 5) times (1 + head_pct/100) and every β (load torque F_T, eq. 6) times
-/// (1 + torque_pct/100). [`CurveError::NONE`] gives the paper's bench exactly. The message
-/// (one line) says why the parameters are refused.
-pub fn true_bench(e: CurveError) -> Result<WhiteBox<f64>, String> {
+/// (1 + torque_pct/100), and its rotor's inertia J the paper's times `rotor_inertia`.
+/// [`CurveError::NONE`] and 1 give the paper's bench exactly. The message (one line) says why
+/// the parameters are refused.
+pub fn true_bench(e: CurveError, rotor_inertia: f64) -> Result<WhiteBox<f64>, String> {
     let mut p = BenchParams::<f64>::paper();
     let head = 1.0 + e.head_pct / 100.0;
     let load = 1.0 + e.torque_pct / 100.0;
     p.alpha.iter_mut().for_each(|a| *a *= head);
     p.beta.iter_mut().for_each(|b| *b *= load);
+    p.inertia_kg_m2 *= rotor_inertia;
     WhiteBox::new(p).map_err(|err| {
         format!(
             "--curve-error {},{}: the scaled pump-head and load-torque curves are refused: {err}",
@@ -456,7 +483,8 @@ impl Plant {
         valve_factor: f64,
         torque_ref_pct: f64,
     ) -> Result<Self, PlantError> {
-        let bench = true_bench(o.curve_error).map_err(PlantError::Options)?;
+        let bench =
+            true_bench(o.curve_error, o.dynamics.rotor_inertia).map_err(PlantError::Options)?;
         let nominal_k2 = bench.params().valve_k2;
         let static_head_c_mca = bench.params().static_head_c_mca;
         let mut plant = Plant {
@@ -670,9 +698,9 @@ mod tests {
         assert_eq!(o.dynamics, Dynamics::NONE);
         assert_eq!(parse_water_inertia("0").unwrap(), 0.0);
         assert_eq!(parse_lag_ms("--drive-lag-ms", "0").unwrap(), 0.0);
-        assert_eq!(true_bench(zero).unwrap(), WhiteBox::<f64>::paper());
+        assert_eq!(true_bench(zero, 1.0).unwrap(), WhiteBox::<f64>::paper());
         assert_eq!(
-            true_bench(parse_curve_error("-0").unwrap()).unwrap(),
+            true_bench(parse_curve_error("-0").unwrap(), 1.0).unwrap(),
             WhiteBox::<f64>::paper()
         );
     }
@@ -680,7 +708,7 @@ mod tests {
     #[test]
     fn curve_error_scales_every_alpha_up_and_every_beta_down() {
         let paper = BenchParams::<f64>::paper();
-        let b = true_bench(parse_curve_error("5").unwrap()).unwrap();
+        let b = true_bench(parse_curve_error("5").unwrap(), 1.0).unwrap();
         let p = b.params();
         for (a, a0) in p.alpha.iter().zip(&paper.alpha) {
             assert_eq!(*a, a0 * 1.05);
@@ -699,7 +727,7 @@ mod tests {
         );
         // Parameters the model refuses are a one-line message naming the option.
         // The two curves apart: 8 % more head and 8 % more load torque.
-        let p = true_bench(parse_curve_error("8,8").unwrap()).unwrap();
+        let p = true_bench(parse_curve_error("8,8").unwrap(), 1.0).unwrap();
         assert_eq!(p.params().alpha[0], paper.alpha[0] * 1.08);
         assert_eq!(p.params().beta[0], paper.beta[0] * 1.08);
         for text in ["1,2,3", "x,1", "1,30", ""] {
@@ -707,10 +735,13 @@ mod tests {
             assert!(e.starts_with("--curve-error"), "{e}");
         }
         for pct in [f64::NAN, -100.0] {
-            let e = true_bench(CurveError {
-                head_pct: pct,
-                torque_pct: -pct,
-            })
+            let e = true_bench(
+                CurveError {
+                    head_pct: pct,
+                    torque_pct: -pct,
+                },
+                1.0,
+            )
             .unwrap_err();
             assert!(
                 e.starts_with("--curve-error ") && e.contains("refused"),
@@ -816,6 +847,7 @@ mod tests {
             dynamics: Dynamics {
                 water_inertia: 0.0,
                 drive_lag_s: 0.05,
+                rotor_inertia: 1.0,
             },
             ..PlantOptions::with_seed(1)
         };
@@ -833,5 +865,39 @@ mod tests {
         assert!((frac - (1.0 - (-1.0f64).exp())).abs() < 1e-9, "{frac}");
         let d = p.frame().drive.unwrap();
         assert_eq!(d.torque_pct, p.truth().torque_pct as f32);
+    }
+
+    /// A rotor of `f` × the paper's inertia: the same steady state, and the speed's first
+    /// response to a torque step `1 / f` of the paper's (the surplus is the same at the
+    /// start); with a drive lag and a water column too. Out of its range, refused.
+    #[test]
+    fn the_rotor_inertia_scales_the_speed_response() {
+        for (water, drive) in [(0.0, 0.0), (0.1, 0.03)] {
+            let first_rise = |f: f64| {
+                let o = PlantOptions {
+                    dynamics: Dynamics {
+                        water_inertia: water,
+                        drive_lag_s: drive,
+                        rotor_inertia: f,
+                    },
+                    ..PlantOptions::with_seed(1)
+                };
+                let mut p = Plant::new(&o, 1.0, 40.0).unwrap();
+                let w0 = p.truth().speed_rpm;
+                p.advance(60.0, 1e-3).unwrap();
+                (w0, p.truth().speed_rpm - w0)
+            };
+            let (w1, r1) = first_rise(1.0);
+            for f in [0.5, 2.0, 4.0] {
+                let (w, r) = first_rise(f);
+                assert_eq!(w, w1, "{f}: the steady state");
+                assert!((r * f / r1 - 1.0).abs() < 0.01, "{f}: {r} against {r1}");
+            }
+        }
+        assert_eq!(parse_rotor_inertia("1").unwrap(), 1.0);
+        for bad in ["0.2", "4.5", "nan", "-1", "x"] {
+            let e = parse_rotor_inertia(bad).unwrap_err();
+            assert!(e.starts_with("--rotor-inertia"), "{e}");
+        }
     }
 }

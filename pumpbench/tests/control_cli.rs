@@ -132,6 +132,13 @@ fn bad_scenarios_and_options_are_refused_with_one_line() {
         &["--curve-error 30"],
         "curve error",
     );
+    for f in ["0.1", "5", "nan"] {
+        refused(
+            &pumpbench(&["control", "--scenario", &s, "--rotor-inertia", f]),
+            &["--rotor-inertia", f],
+            "rotor inertia",
+        );
+    }
     refused(
         &pumpbench(&["control", "--scenario", &s, "--plot", "x.jpg"]),
         &["--plot x.jpg", ".png"],
