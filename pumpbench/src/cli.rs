@@ -177,7 +177,8 @@ pub struct ControlArgs {
     /// How long a scenario file's last row holds, s.
     #[arg(long, default_value_t = 6.0)]
     pub hold_s: f64,
-    /// The plant: curve error, water inertia, drive lag, pressure transmitter lag.
+    /// The plant: curve error, rotor inertia, water inertia, drive lag, pressure transmitter
+    /// lag.
     #[command(flatten)]
     pub plant: PlantArgs,
     /// A holding-register write before the run, as commissioning sets it (repeatable), e.g.
@@ -458,7 +459,8 @@ pub struct BenchDataArgs {
     /// with. E.g. `20:1.3,40:0.7,60:1`.
     #[arg(long, value_name = "T:FACTOR,...", allow_hyphen_values = true)]
     pub valve_steps: Option<String>,
-    /// The plant: curve error, water inertia, drive lag, pressure transmitter lag.
+    /// The plant: curve error, rotor inertia, water inertia, drive lag, pressure transmitter
+    /// lag.
     #[command(flatten)]
     pub plant: PlantArgs,
     /// Add the columns speed_true (rpm), flow_true (l/s), pressure_true (mca) and k2_true

@@ -14,7 +14,8 @@
 //!   −0.375..30.9375 l/s), read through a 150 Ω shunt by a 12-bit 3.3 V ADC (0..22 mA in 4096
 //!   codes): one code is 3.4 mm of water and 0.010 l/s.
 //!
-//! Two dynamics the paper's model lacks can be added ([`Dynamics`]; both 0 by default):
+//! Two dynamics the paper's model lacks can be added ([`Dynamics`]; both 0 by default, and
+//! the rotor's inertia below at 1):
 //! - water-column inertia (mca·s²/l): the flow is a state,
 //!   `L dQ/dt = F_H(ω, Q) − (k1 + k2²) Q² + c`, the head the pump makes beyond what the pipe,
 //!   the valve and the static head take accelerating the water column (for a pipe of length
@@ -150,7 +151,8 @@ impl CurveError {
     };
 }
 
-/// Dynamics the paper's model lacks (0: not there).
+/// Dynamics the paper's model lacks (0: not there), and the rotor's inertia (1: the paper's).
+/// Any other than [`Dynamics::NONE`] runs the rich bench's integrator.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Dynamics {
     /// Water-column inertia L, mca·s²/l: `L dQ/dt` is the head left over from the flow
@@ -462,7 +464,7 @@ pub struct Plant {
     nominal_k2: f64,
     static_head_c_mca: f64,
     state: BenchState<f64>,
-    /// With inertia or a drive lag the rich bench carries the state; without, the white-box
+    /// With any dynamics but [`Dynamics::NONE`] the rich bench carries the state; else the white-box
     /// bench alone.
     rich: Option<Rich>,
     dynamics: Dynamics,

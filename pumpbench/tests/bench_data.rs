@@ -57,6 +57,8 @@ fn without_the_new_options_the_record_is_byte_for_byte_unchanged() {
     let dir = tempfile::tempdir().unwrap();
     let u = write(dir.path(), "u.csv", U_CSV);
     let defaults = [
+        "--rotor-inertia",
+        "1",
         "--water-inertia",
         "0",
         "--drive-lag-ms",
@@ -571,4 +573,37 @@ fn the_drive_lag_delays_the_speed_and_keeps_the_steady_state() {
         .col("flow_true")
         .iter()
         .all(|q| q.is_finite() && *q > 0.0));
+}
+
+/// `--rotor-inertia F` reaches the bench: the speed's first rise after a torque step is
+/// 1 / F of the paper's rotor's (the true speed, `--truth`), the steady speed the same.
+#[test]
+fn a_heavier_rotor_accelerates_slower() {
+    let dir = tempfile::tempdir().unwrap();
+    let u = write(
+        dir.path(),
+        "u.csv",
+        &input(4.0, 0.01, |t| if t < 3.0 { 40.0 } else { 60.0 }),
+    );
+    let rise = |f: &str| {
+        let r = Table::parse(&bench_data(&[
+            "--input",
+            &u,
+            "--truth",
+            "--rotor-inertia",
+            f,
+        ]));
+        let w = r.col("speed_true");
+        let (k0, k1) = (row_at(&r, 3.0), row_at(&r, 3.01));
+        (w[k0], w[k1] - w[k0])
+    };
+    let (w1, r1) = rise("1");
+    for (f, factor) in [("0.5", 0.5), ("2", 2.0)] {
+        let (w, r) = rise(f);
+        assert!((w / w1 - 1.0).abs() < 1e-6, "{f}: steady {w} against {w1}");
+        assert!(
+            (r * factor / r1 - 1.0).abs() < 0.08,
+            "{f}: {r} against {r1}"
+        );
+    }
 }
