@@ -175,11 +175,8 @@ pub fn bench_data(a: BenchDataArgs) -> Result<(), Failure> {
         plant: plant_options(&a.plant, a.seed, &a.flow_lag_ms)?,
         truth: a.truth,
     };
-    plant::true_bench(
-        options.plant.curve_error,
-        options.plant.dynamics.rotor_inertia,
-    )
-    .map_err(Failure::usage)?;
+    plant::true_bench(options.plant.curve_error, options.plant.rotor_inertia)
+        .map_err(Failure::usage)?;
     check_optional_output(&[("--input", &a.input)], a.output.as_deref())?;
     let data =
         input::read_input_to_integrate(&a.input, benchdata::STEP_MS, benchdata::TOO_MANY_STEPS)?;
@@ -200,8 +197,8 @@ pub fn plant_options(
             water_inertia: plant::parse_water_inertia(&a.water_inertia).map_err(Failure::usage)?,
             drive_lag_s: plant::parse_lag_ms("--drive-lag-ms", &a.drive_lag_ms)
                 .map_err(Failure::usage)?,
-            rotor_inertia: plant::parse_rotor_inertia(&a.rotor_inertia).map_err(Failure::usage)?,
         },
+        rotor_inertia: plant::parse_rotor_inertia(&a.rotor_inertia).map_err(Failure::usage)?,
         flow_lag_s: plant::parse_lag_ms("--flow-lag-ms", flow_lag_ms).map_err(Failure::usage)?,
         pressure_lag_s: plant::parse_lag_ms("--pressure-lag-ms", &a.pressure_lag_ms)
             .map_err(Failure::usage)?,

@@ -1381,7 +1381,7 @@ pub fn command(a: ControlArgs) -> Result<(), Failure> {
         (None, None) => "40".into(),
     };
     let o = plant_options(&a.plant, a.seed, &flow_lag)?;
-    crate::plant::true_bench(o.curve_error, o.dynamics.rotor_inertia).map_err(Failure::usage)?;
+    crate::plant::true_bench(o.curve_error, o.rotor_inertia).map_err(Failure::usage)?;
     let inputs: Vec<Named> = path
         .as_deref()
         .map(|p| ("--scenario", p))
@@ -1431,7 +1431,7 @@ pub fn command(a: ControlArgs) -> Result<(), Failure> {
         // (+ 0.0: a curve error of 0 is written 0, not -0.)
         Short(o.curve_error.head_pct + 0.0),
         Short(o.curve_error.torque_pct + 0.0),
-        Short(o.dynamics.rotor_inertia),
+        Short(o.rotor_inertia),
         Short(o.dynamics.water_inertia),
         Short(o.dynamics.drive_lag_s * 1000.0),
         Short(o.pressure_lag_s * 1000.0),

@@ -14,8 +14,7 @@
 //!   −0.375..30.9375 l/s), read through a 150 Ω shunt by a 12-bit 3.3 V ADC (0..22 mA in 4096
 //!   codes): one code is 3.4 mm of water and 0.010 l/s.
 //!
-//! Two dynamics the paper's model lacks can be added ([`Dynamics`]; both 0 by default, and
-//! the rotor's inertia below at 1):
+//! Two dynamics the paper's model lacks can be added ([`Dynamics`]; both 0 by default):
 //! - water-column inertia (mca·s²/l): the flow is a state,
 //!   `L dQ/dt = F_H(ω, Q) − (k1 + k2²) Q² + c`, the head the pump makes beyond what the pipe,
 //!   the valve and the static head take accelerating the water column (for a pipe of length
@@ -24,7 +23,7 @@
 //!   first-order lag.
 //!
 //! Its rotor's inertia (J of eq. 3) can be the paper's times a factor
-//! ([`Dynamics::rotor_inertia`]; another motor and impeller).
+//! ([`PlantOptions::rotor_inertia`]; another motor and impeller).
 //!
 //! The bench can differ from the paper's model: its valve coefficient k2 set to a factor of
 //! the paper's 0.1082 √mca/(l/s) at any time ([`Plant::set_valve_factor`]), and a curve error
@@ -151,8 +150,7 @@ impl CurveError {
     };
 }
 
-/// Dynamics the paper's model lacks (0: not there), and the rotor's inertia (1: the paper's).
-/// Any other than [`Dynamics::NONE`] runs the rich bench's integrator.
+/// Dynamics the paper's model lacks (0: not there).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Dynamics {
     /// Water-column inertia L, mca·s²/l: `L dQ/dt` is the head left over from the flow
@@ -160,9 +158,6 @@ pub struct Dynamics {
     pub water_inertia: f64,
     /// First-order lag of the drive's torque loop, s (0..=2 s).
     pub drive_lag_s: f64,
-    /// The rotor's inertia (motor, coupling, impeller: J of eq. 3), × the paper's
-    /// ([`ROTOR_INERTIA_RANGE`]; 1: the paper's).
-    pub rotor_inertia: f64,
 }
 
 impl Dynamics {
@@ -170,7 +165,6 @@ impl Dynamics {
     pub const NONE: Self = Self {
         water_inertia: 0.0,
         drive_lag_s: 0.0,
-        rotor_inertia: 1.0,
     };
 }
 
@@ -380,6 +374,9 @@ pub struct PlantOptions {
     pub curve_error: CurveError,
     /// Water inertia and drive lag.
     pub dynamics: Dynamics,
+    /// The rotor's inertia (motor, coupling, impeller: J of eq. 3), × the paper's
+    /// ([`ROTOR_INERTIA_RANGE`]; 1: the paper's); the white-box bench carries it.
+    pub rotor_inertia: f64,
     /// Flow transmitter lag, s.
     pub flow_lag_s: f64,
     /// Pressure transmitter lag, s.
@@ -394,6 +391,7 @@ impl PlantOptions {
             seed,
             curve_error: CurveError::NONE,
             dynamics: Dynamics::NONE,
+            rotor_inertia: 1.0,
             flow_lag_s: FLOW.tau_s,
             pressure_lag_s: PRESSURE.tau_s,
         }
@@ -464,7 +462,7 @@ pub struct Plant {
     nominal_k2: f64,
     static_head_c_mca: f64,
     state: BenchState<f64>,
-    /// With any dynamics but [`Dynamics::NONE`] the rich bench carries the state; else the white-box
+    /// With inertia or a drive lag the rich bench carries the state; without, the white-box
     /// bench alone.
     rich: Option<Rich>,
     dynamics: Dynamics,
@@ -485,8 +483,7 @@ impl Plant {
         valve_factor: f64,
         torque_ref_pct: f64,
     ) -> Result<Self, PlantError> {
-        let bench =
-            true_bench(o.curve_error, o.dynamics.rotor_inertia).map_err(PlantError::Options)?;
+        let bench = true_bench(o.curve_error, o.rotor_inertia).map_err(PlantError::Options)?;
         let nominal_k2 = bench.params().valve_k2;
         let static_head_c_mca = bench.params().static_head_c_mca;
         let mut plant = Plant {
@@ -849,7 +846,6 @@ mod tests {
             dynamics: Dynamics {
                 water_inertia: 0.0,
                 drive_lag_s: 0.05,
-                rotor_inertia: 1.0,
             },
             ..PlantOptions::with_seed(1)
         };
@@ -880,8 +876,8 @@ mod tests {
                     dynamics: Dynamics {
                         water_inertia: water,
                         drive_lag_s: drive,
-                        rotor_inertia: f,
                     },
+                    rotor_inertia: f,
                     ..PlantOptions::with_seed(1)
                 };
                 let mut p = Plant::new(&o, 1.0, 40.0).unwrap();
