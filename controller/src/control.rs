@@ -39,6 +39,7 @@ use crate::types::{
 };
 use crate::vfd::{VfdMap, VfdReadings};
 use model_core::excitation::McuPulses;
+use model_core::inertia::InertiaProbe;
 use model_core::inverse::Load;
 use model_core::monitor::{Monitor, MonitorConfig, MonitorInputs};
 use model_core::narmax::adapt::OutputMap;
@@ -513,6 +514,10 @@ pub struct Controller<const NP: usize, const HP: usize, const NF: usize, const H
     follow_due: bool,
     observer: Observer<f32>,
     monitor: Monitor<f32>,
+    /// The rotor's inertia, measured on the drive's readings as the monitor takes them.
+    inertia: InertiaProbe<f32>,
+    /// Its factor, × the paper's J, as of the last drive reading.
+    inertia_factor: f32,
     /// Applied torque summed since the last observer step, % · ticks, and the ticks.
     torque_sum: f32,
     torque_ticks: u32,
@@ -617,6 +622,8 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             follow_due: false,
             observer,
             monitor: Monitor::new(MonitorConfig::paper()),
+            inertia: InertiaProbe::new(),
+            inertia_factor: 1.0,
             torque_sum: 0.0,
             torque_ticks: 0,
             vfd_reads_seen: 0,
@@ -694,6 +701,12 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
     /// (`RegulatorOutput::lag_s`; 0 until a setpoint step of the model-based law showed one).
     pub fn measured_lag_s(&self) -> [f32; 2] {
         self.measured_lag_s
+    }
+
+    /// The rotor's inertia measured from the drive's readings, as a factor of the paper's
+    /// ([`model_core::inertia::InertiaProbe::factor`]: 1 until a move has shown it).
+    pub fn inertia_factor(&self) -> f32 {
+        self.inertia_factor
     }
 
     /// What the SCADA registers hold now.
@@ -931,6 +944,7 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
         let r = self.regulator.get_or_insert_with(|| {
             Regulator::new(controlled, measured, applied, v.speed_rpm).with_lag(lag_s)
         });
+        r.set_inertia(self.inertia_factor);
         let o = r.step(self.whitebox.params(), v.load, s, setpoint, measured);
         self.measured_lag_s[k] = o.lag_s;
         o.torque_pct
@@ -970,6 +984,15 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             flow_fault: self.flow_in.faulted(),
             vfd_link_alarm: inp.vfd.link_alarm,
         });
+        if let Some(d) = self.monitor.motion() {
+            // In the loops, only the moves they make teach the inertia: a valve step's new
+            // load torque shows in the flow reading late (a first version that learnt from
+            // valve steps read 1.03..1.12 × on the paper's rotor).
+            let learn = d.turning && self.regulator.as_ref().is_none_or(Regulator::moving);
+            self.inertia.update(learn, d.moved, d.predicted_rpm_per_s);
+            self.inertia_factor = self.inertia.factor();
+            self.monitor.set_inertia(self.inertia_factor);
+        }
         self.view = LoopView {
             load: Load {
                 valve_k2: e.valve_k2,

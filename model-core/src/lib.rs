@@ -37,7 +37,9 @@
 //! [`observer`] is an extended Kalman filter on this bench: speed, flow, the valve k2 and the
 //! curves' scales from whatever measurements arrive (pressure, flow, the VFD's speed), each
 //! with its standard deviation; [`monitor`] turns it and the measurements into alarms (dry
-//! run, no flow, end of curve, load changed, model residual, transmitter and link faults).
+//! run, no flow, end of curve, load changed, model residual, transmitter and link faults) and
+//! hands its drive readings on to [`inertia`], which measures the rotor's inertia for the
+//! controller's loops and the dry-run rule.
 //!
 //! # Use
 //!
@@ -59,6 +61,7 @@ pub mod equations;
 pub mod error;
 pub mod excitation;
 pub mod flow;
+pub mod inertia;
 pub mod inverse;
 pub mod monitor;
 pub mod narmax;

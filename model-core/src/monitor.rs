@@ -6,7 +6,7 @@
 //! | 0 | pressure transmitter | the caller says it is in fault (NAMUR NE 43) | no |
 //! | 1 | flow transmitter | the caller says it is in fault | no |
 //! | 2 | VFD link | the caller says the link alarm stands | no |
-//! | 3 | dry run / loss of prime | the load torque the motion shows (delivered torque − inertia × acceleration) is below `threshold` × what the paper's load curve needs at the speed and flow (measured when they are, else estimated), above `min_speed_rpm` | yes |
+//! | 3 | dry run / loss of prime | the load torque the motion shows (delivered torque − inertia × acceleration; the inertia [`Monitor::set_inertia`] was told, else the paper's) is below `threshold` × what the paper's load curve needs at the speed and flow (measured when they are, else estimated), above `min_speed_rpm` | yes |
 //! | 4 | no flow / closed valve | estimated flow below `threshold` l/s above `min_speed_rpm`, or k2 above `closed_valve_k2_ratio` × its reference | no |
 //! | 5 | end of curve (run-out) | estimated or measured flow above `threshold` l/s (the fitted range ends at 27.8) | no |
 //! | 6 | load changed | k2 more than `threshold` (a fraction) from its reference, above `min_speed_rpm` (k2 is poorly observed with little flow) | no (informational) |
@@ -21,6 +21,7 @@
 //! An alarm raised again after it cleared needs a new acknowledge.
 
 use crate::equations::{electromagnetic_torque_pct, load_torque_from_motion_pct, load_torque_pct};
+use crate::inertia::InertiaProbe;
 use crate::observer::{Estimate, Use};
 use crate::params::{BenchParams, FITTED_FLOW_MAX_LPS};
 use crate::scalar::Real;
@@ -210,6 +211,22 @@ impl<T: Real> Timer<T> {
     }
 }
 
+/// One fresh drive reading as the alarms saw it, for the inertia probe
+/// ([`crate::inertia::InertiaProbe::update`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DriveMotion<T> {
+    /// The speed change since the drive's last reading and the time between them, rpm and s
+    /// (zeros without a last reading).
+    pub moved: (T, T),
+    /// The acceleration the paper's inertia gives the torque surplus now (the delivered
+    /// torque less the load torque at the measured flow, times the observer's torque scale),
+    /// rpm/s.
+    pub predicted_rpm_per_s: T,
+    /// The pump turns above the alarms' minimum speed against a positive load torque, and
+    /// the dry-run alarm is not raised.
+    pub turning: bool,
+}
+
 /// The alarms' state.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Monitor<T> {
@@ -225,7 +242,13 @@ pub struct Monitor<T> {
     last_drive_speed: Option<(T, T)>,
     /// Last measured flow and its age, s.
     last_flow: Option<(T, T)>,
+    /// The drive's reading at the last update, as the inertia probe takes it.
+    motion: Option<DriveMotion<T>>,
+    /// The paper's rpm/s per % of torque surplus (the inertia probe's reference).
     accel: T,
+    /// The same for the rotor's inertia as measured ([`Self::set_inertia`]): the dry-run
+    /// rule's.
+    rotor_accel: T,
     gamma: [T; 6],
     beta: [T; 10],
 }
@@ -243,7 +266,9 @@ impl<T: Real> Monitor<T> {
             last_speed: None,
             last_drive_speed: None,
             last_flow: None,
+            motion: None,
             accel: par.accel_rpm_per_s_per_pct(),
+            rotor_accel: par.accel_rpm_per_s_per_pct(),
             gamma: par.gamma,
             beta: par.beta,
         }
@@ -252,6 +277,29 @@ impl<T: Real> Monitor<T> {
     /// The configuration.
     pub fn config(&self) -> &MonitorConfig<T> {
         &self.cfg
+    }
+
+    /// The drive's reading at the last [`Self::update`] (`None` without a fresh one), as the
+    /// inertia probe ([`crate::inertia::InertiaProbe::update`]) takes it: the alarms' own
+    /// speed change and load torque, not a second copy of them.
+    pub fn motion(&self) -> Option<DriveMotion<T>> {
+        self.motion
+    }
+
+    /// The rotor's inertia as a factor of the paper's (the inertia probe's,
+    /// [`crate::inertia::InertiaProbe::factor`]), for the load the motion shows in the dry-run
+    /// rule: with the paper's J, the coast of a rotor four times as heavy at 0 % torque showed
+    /// a quarter of its load and tripped dry run (latched) in a pressure loop's downward step.
+    /// A factor not finite or outside [`crate::inertia::InertiaProbe::RANGE`] sets the paper's.
+    /// A dry pump at a steady speed shows its (small) load whatever the inertia: the factor
+    /// moves only what accelerations read.
+    pub fn set_inertia(&mut self, factor: T) {
+        let (lo, hi) = InertiaProbe::<T>::RANGE;
+        self.rotor_accel = if factor >= T::from_f64(lo) && factor <= T::from_f64(hi) {
+            self.accel / factor
+        } else {
+            self.accel
+        };
     }
 
     /// Alarm bits now (see the module table).
@@ -339,8 +387,14 @@ impl<T: Real> Monitor<T> {
         // apart), else the estimate's; a switch between the two is not an acceleration.
         let accel = self.accel;
         let drive = m.vfd_speed_rpm.filter(|w| w.is_finite());
+        // `moved`: the speed change since the drive's last reading and the time between them
+        // (zero without one), for the inertia probe ([`Self::motion`]).
+        let mut moved = (T::ZERO, T::ZERO);
         let (speed, rate) = match (drive, self.last_drive_speed) {
-            (Some(w), Some((w0, age))) if age + dt > T::ZERO => (w, (w - w0) / (age + dt)),
+            (Some(w), Some((w0, age))) if age + dt > T::ZERO => {
+                moved = (w - w0, age + dt);
+                (w, moved.0 / moved.1)
+            }
             (Some(w), _) => (w, T::ZERO),
             (None, _) => match self.last_speed {
                 Some(w0) if dt > T::ZERO => (e.speed_rpm, (e.speed_rpm - w0) / dt),
@@ -363,9 +417,17 @@ impl<T: Real> Monitor<T> {
             Some(t) if t.is_finite() => t,
             _ => electromagnetic_torque_pct(&self.gamma, applied_torque_pct(m.torque_ref_pct)),
         };
-        let shown = load_torque_from_motion_pct(delivered, rate, accel);
+        let shown = load_torque_from_motion_pct(delivered, rate, self.rotor_accel);
         let needed = load_torque_pct(&self.beta, speed, flow);
         let fast = speed > c.min_speed_rpm && needed > T::ZERO;
+        // For the inertia probe: the same reading's speed change and torque surplus, as the
+        // acceleration the paper's J gives it.
+        self.motion = drive.map(|_| DriveMotion {
+            moved,
+            predicted_rpm_per_s: accel * (delivered - e.torque_scale * needed),
+            // A pump running dry is not on its load curve: it teaches nothing.
+            turning: fast && !self.timers[3].active,
+        });
         let ratio = if fast { shown / needed } else { T::ONE };
         let d = c.dry_run;
         self.timers[3].update(
@@ -780,6 +842,44 @@ mod tests {
             // Not even one update reads dry: that would restart the clear delay of a
             // dry-run alarm waiting for its acknowledge.
             assert!(mon.timers[3].clear_now, "update {k} reads dry");
+        }
+    }
+
+    /// A rotor four times the paper's coasting at 0 % torque: its speed falls at a quarter of
+    /// the rate the paper's J gives its load. With the paper's J the motion shows a quarter of
+    /// the load and the dry-run alarm rises after its 2 s; told the inertia
+    /// ([`Monitor::set_inertia`]) it shows the whole load and stays quiet. A factor outside
+    /// the probe's range or not a number is the paper's J.
+    #[test]
+    fn the_dry_run_rule_takes_the_inertia_measured() {
+        let o = Observer::<f64>::new(ObserverConfig::paper(), 50.0).unwrap();
+        let e = o.estimate_now();
+        let coast = |factor: f64| {
+            let mut mon = Monitor::new(MonitorConfig::<f64>::paper());
+            mon.set_inertia(factor);
+            let mut w = 1500.0;
+            let mut bits = 0;
+            for _ in 0..50 {
+                let needed = load_torque_pct(&mon.beta, w, e.flow_lps);
+                bits |= mon.update(&MonitorInputs {
+                    dt_s: 0.05,
+                    estimate: e,
+                    torque_ref_pct: 0.0,
+                    vfd_torque_pct: Some(0.0),
+                    vfd_speed_rpm: Some(w),
+                    measured_flow_lps: Some(e.flow_lps),
+                    pressure_fault: false,
+                    flow_fault: false,
+                    vfd_link_alarm: false,
+                });
+                w -= mon.accel / 4.0 * needed * 0.05;
+            }
+            assert!(w > 600.0, "still turning above the rule's minimum: {w}");
+            bits & DRY_RUN
+        };
+        assert_eq!(coast(4.0), 0, "told the inertia");
+        for paper in [1.0, f64::NAN, 0.1, 5.0] {
+            assert_eq!(coast(paper), DRY_RUN, "{paper}");
         }
     }
 }

@@ -155,8 +155,14 @@ pub struct ControlArgs {
     pub scenario: Option<String>,
     /// Instead of the built-in plant, serve the plant protocol (`controller::plant`, version 1)
     /// on standard input and output: an external plant closes the loop in lockstep, its
-    /// scenario in its own `W` lines (docs/control.md); the controller is the boards'.
-    #[arg(long, conflicts_with_all = ["scenario", "controller", "targets", "output", "plot", "set"])]
+    /// scenario in its own `W` lines (docs/control.md); the controller is the boards'. The
+    /// built-in plant's options (its curves, lags, inertias, seed) and the scenario's are
+    /// refused with it: the external plant is the plant.
+    #[arg(long, conflicts_with_all = [
+        "scenario", "controller", "targets", "output", "plot", "set", "seed", "hold_s",
+        "flow_lag_ms", "curve_error", "water_inertia", "drive_lag_ms", "rotor_inertia",
+        "pressure_lag_ms",
+    ])]
     pub plant_stdio: bool,
     /// The law(s) to run.
     #[arg(long, value_enum, default_value = "both")]

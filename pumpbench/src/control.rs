@@ -528,6 +528,11 @@ pub struct Trace {
     /// The plant's lag beyond the model the pressure and flow loops measured by the run's
     /// end, s (`Controller::measured_lag_s`; 0 if none was measured: the PI alone never does).
     pub measured_lag_s: [f32; 2],
+    /// The rotor's inertia the controller measured by the run's end, × the paper's
+    /// (`Controller::inertia_factor`; 1 until measured).
+    pub inertia_factor: f32,
+    /// The time a protection held the torque at 0 % (status bit 7), s.
+    pub tripped_s: f64,
 }
 
 /// A `--set REGISTER=VALUE`: two decimal u16.
@@ -663,6 +668,8 @@ pub fn run(
         max_rate_pct_per_s: 0.0,
         rate_limit_pct_per_s: f64::from(lock.scada().commands().control.rate_pct_per_s),
         measured_lag_s: [0.0; 2],
+        inertia_factor: 1.0,
+        tripped_s: 0.0,
     };
     let mut last_torque: Option<f32> = None;
     let mut t = start_ms;
@@ -722,8 +729,12 @@ pub fn run(
             let rate = f64::from((reply.torque_ref_pct - prev).abs()) / (period as f64 * 1e-3);
             trace.max_rate_pct_per_s = trace.max_rate_pct_per_s.max(rate);
         }
+        if status.tripped {
+            trace.tripped_s += period as f64 * 1e-3;
+        }
         last_torque = Some(reply.torque_ref_pct);
         trace.measured_lag_s = c.measured_lag_s();
+        trace.inertia_factor = c.inertia_factor();
         plant.apply(&reply)?;
         trace.samples.push(Sample {
             t_s: t as f64 * 1e-3,
@@ -1097,13 +1108,16 @@ pub fn report(
         let _ = writeln!(
             s,
             "{}: torque NaN steps {}, outside its limits {}, largest change into a period with \
-             the link up {:.1} %/s; measured plant lag: pressure {:.0} ms, flow {:.0} ms",
+             the link up {:.1} %/s; measured plant lag: pressure {:.0} ms, flow {:.0} ms; \
+             rotor inertia measured: {:.2} × the paper's; tripped (a protection's 0 %) {:.3} s",
             trace.law.name(),
             trace.nan_steps,
             trace.out_of_limits,
             trace.max_rate_pct_per_s,
             trace.measured_lag_s[0] * 1000.0,
-            trace.measured_lag_s[1] * 1000.0
+            trace.measured_lag_s[1] * 1000.0,
+            trace.inertia_factor,
+            trace.tripped_s
         );
     }
     let n = runs.first().map_or(0, |r| r.1.len());
