@@ -222,8 +222,8 @@ pub struct DriveMotion<T> {
     /// torque less the load torque at the measured flow, times the observer's torque scale),
     /// rpm/s.
     pub predicted_rpm_per_s: T,
-    /// The pump turns above the alarms' minimum speed against a positive load torque, and
-    /// the dry-run alarm is not raised.
+    /// The reading can teach: the pump turns above the alarms' minimum speed against a
+    /// positive load torque, and the dry-run alarm is not raised.
     pub turning: bool,
 }
 
@@ -290,12 +290,16 @@ impl<T: Real> Monitor<T> {
     /// [`crate::inertia::InertiaProbe::factor`]), for the load the motion shows in the dry-run
     /// rule: with the paper's J, the coast of a rotor four times as heavy at 0 % torque showed
     /// a quarter of its load and tripped dry run (latched) in a pressure loop's downward step.
-    /// A factor not finite or outside [`crate::inertia::InertiaProbe::RANGE`] sets the paper's.
+    /// A factor of 1 or less, not finite, or above [`crate::inertia::InertiaProbe::RANGE`] sets
+    /// the paper's.
     /// A dry pump at a steady speed shows its (small) load whatever the inertia: the factor
     /// moves only what accelerations read.
     pub fn set_inertia(&mut self, factor: T) {
-        let (lo, hi) = InertiaProbe::<T>::RANGE;
-        self.rotor_accel = if factor >= T::from_f64(lo) && factor <= T::from_f64(hi) {
+        // Heavier only: a lighter rotor with the paper's J shows more load on a coast, not
+        // less, and a torque reading that lags (a drive's filter) reads the inertia low (at
+        // 200 ms, 0.39 × on the paper's rotor: taken, every coast would read dry).
+        let hi = T::from_f64(InertiaProbe::<T>::RANGE.1);
+        self.rotor_accel = if factor > T::ONE && factor <= hi {
             self.accel / factor
         } else {
             self.accel
@@ -420,16 +424,19 @@ impl<T: Real> Monitor<T> {
         let shown = load_torque_from_motion_pct(delivered, rate, self.rotor_accel);
         let needed = load_torque_pct(&self.beta, speed, flow);
         let fast = speed > c.min_speed_rpm && needed > T::ZERO;
+        let ratio = if fast { shown / needed } else { T::ONE };
+        let d = c.dry_run;
         // For the inertia probe: the same reading's speed change and torque surplus, as the
         // acceleration the paper's J gives it.
         self.motion = drive.map(|_| DriveMotion {
             moved,
             predicted_rpm_per_s: accel * (delivered - e.torque_scale * needed),
-            // A pump running dry is not on its load curve: it teaches nothing.
+            // A pump whose dry-run alarm is up is not on its load curve. (Not the rule's
+            // condition: a heavy rotor's first coast reads dry on the paper's J, and it is the
+            // move that teaches the probe; gated on it, rotors 3 and 4 × the paper's tripped
+            // on a first downward flow step.)
             turning: fast && !self.timers[3].active,
         });
-        let ratio = if fast { shown / needed } else { T::ONE };
-        let d = c.dry_run;
         self.timers[3].update(
             dt,
             ratio < d.threshold,
@@ -848,8 +855,8 @@ mod tests {
     /// A rotor four times the paper's coasting at 0 % torque: its speed falls at a quarter of
     /// the rate the paper's J gives its load. With the paper's J the motion shows a quarter of
     /// the load and the dry-run alarm rises after its 2 s; told the inertia
-    /// ([`Monitor::set_inertia`]) it shows the whole load and stays quiet. A factor outside
-    /// the probe's range or not a number is the paper's J.
+    /// ([`Monitor::set_inertia`]) it shows the whole load and stays quiet. A factor of 1 or
+    /// less, above the probe's range or not a number is the paper's J.
     #[test]
     fn the_dry_run_rule_takes_the_inertia_measured() {
         let o = Observer::<f64>::new(ObserverConfig::paper(), 50.0).unwrap();
@@ -878,8 +885,44 @@ mod tests {
             bits & DRY_RUN
         };
         assert_eq!(coast(4.0), 0, "told the inertia");
-        for paper in [1.0, f64::NAN, 0.1, 5.0] {
+        for paper in [1.0, 0.5, f64::NAN, 0.1, 5.0] {
             assert_eq!(coast(paper), DRY_RUN, "{paper}");
+        }
+    }
+
+    /// A steady pump whose torque reading is off the paper's fit by 2 % teaches the inertia
+    /// probe nothing (under `InertiaProbe::MIN_SURPLUS_PCT`); a 10 % surplus, a move's, does
+    /// (here with no speed change to show for it).
+    #[test]
+    fn a_small_steady_surplus_teaches_nothing() {
+        let o = Observer::<f64>::new(ObserverConfig::paper(), 50.0).unwrap();
+        let e = o.estimate_now();
+        for (off, teaches) in [(2.0, false), (-2.0, false), (10.0, true), (-10.0, true)] {
+            let mut mon = Monitor::new(MonitorConfig::<f64>::paper());
+            let needed = load_torque_pct(&mon.beta, 1300.0, e.flow_lps) * e.torque_scale;
+            for _ in 0..2 {
+                mon.update(&MonitorInputs {
+                    dt_s: 0.05,
+                    estimate: e,
+                    torque_ref_pct: 50.0,
+                    vfd_torque_pct: Some(needed + off),
+                    vfd_speed_rpm: Some(1300.0),
+                    measured_flow_lps: Some(e.flow_lps),
+                    pressure_fault: false,
+                    flow_fault: false,
+                    vfd_link_alarm: false,
+                });
+            }
+            let m = mon.motion().unwrap();
+            let mut probe = InertiaProbe::<f64>::new();
+            for _ in 0..100 {
+                probe.update(m.turning, (0.0, 0.05), m.predicted_rpm_per_s);
+            }
+            assert_eq!(
+                probe.evidence_rpm2() > 0.0,
+                teaches,
+                "{off}: {m:?} {probe:?}"
+            );
         }
     }
 }
