@@ -19,8 +19,7 @@
 //!   λ = [`ControlSettings::pressure_closed_loop_s`] or [`ControlSettings::flow_closed_loop_s`]
 //!   ([`PRESSURE_CLOSED_LOOP_S`], [`FLOW_CLOSED_LOOP_S`] by default), and `Ti = 0.8 τ`
 //!   ([`INTEGRAL_TIME_PER_TAU`]); the error is the reference lagged by the transmitter's time
-//!   constant ([`ControlSettings::pressure_lag_s`], [`ControlSettings::flow_lag_s`]; with the
-//!   model, at most [`LAG_MARGIN`] times the lag measured on a setpoint step) minus the
+//!   constant ([`ControlSettings::pressure_lag_s`], [`ControlSettings::flow_lag_s`]) minus the
 //!   reading;
 //! - with the model, the loop measures the plant's lag beyond the model on its setpoint steps
 //!   ([`RegulatorOutput::lag_s`]) and runs calmer when it exceeds what the settings cover
@@ -81,12 +80,6 @@ pub const COVERED_LAG_PRESSURE_S: f32 = 0.1;
 /// The same on the flow loop, s (P0, P2, P3, P4 with a 150 ms flow transmitter: 106..151 ms;
 /// the water columns: 171..174 ms).
 pub const COVERED_LAG_FLOW_S: f32 = 0.16;
-/// The margin on the lag the loop measured ([`RegulatorOutput::lag_s`]): λ is never under this
-/// times it (a review: λ = 60 ms on a plant lagging 95 ms overshot 41 %), and the lag the
-/// error assumes never over this times the lag of the last setpoint step learnt from (its
-/// lesson kept). On flow steps across the plants of docs/control.md (transmitters of 40, 100
-/// and 150 ms), 1.5 and 3 lost targets that 2 kept.
-pub const LAG_MARGIN: f32 = 2.0;
 /// The most the loop is calmed (λ and the lag both multiplied by at most this).
 pub const CALM_MAX: f32 = 4.0;
 /// A setpoint step's lesson is undone when the observer's valve k2 moves more than this
@@ -187,9 +180,6 @@ struct LagProbe {
     setpoint: Option<f32>,
     /// The setpoint step being learnt from, if any.
     lesson: Option<Lesson>,
-    /// The lag as of the last lesson kept (its probation over), s; 0 before one. Unlike
-    /// `lag_s`, never a lesson's early reading.
-    kept_s: f32,
 }
 
 impl LagProbe {
@@ -207,7 +197,6 @@ impl LagProbe {
             calm: 1.0,
             setpoint: None,
             lesson: None,
-            kept_s: 0.0,
         }
     }
 
@@ -291,7 +280,6 @@ impl LagProbe {
         l.probation = l.probation.saturating_sub(1);
         if l.probation == 0 {
             self.lesson = None;
-            self.kept_s = self.lag_s;
         }
         false
     }
@@ -357,11 +345,9 @@ pub struct Regulator {
     seen_reference: f32,
     /// The plant's lag beyond the model, measured on the setpoint steps.
     probe: LagProbe,
-    /// The rotor's inertia as a factor of the paper's, as the gains take it (the model's time
-    /// constant scales with it): 1 below [`INERTIA_USED_FROM`].
+    /// The rotor's inertia as a factor of the paper's (the model's time constant scales
+    /// with it).
     inertia: f32,
-    /// The same as measured, for the lag probe's model of the plant (1 if not a number).
-    plant_inertia: f32,
     /// The reference was more than [`MOVING_FRACTION`] of the setpoint from it last period.
     moving: bool,
     last: RegulatorOutput,
@@ -387,7 +373,6 @@ impl Regulator {
             at_range_limit: false,
             seen_reference: measured,
             inertia: 1.0,
-            plant_inertia: 1.0,
             moving: false,
             probe: LagProbe::new(
                 measured,
@@ -438,19 +423,12 @@ impl Regulator {
     /// - on the paper's rotor the probe reads 1.01..1.02; a first version that learnt from
     ///   valve steps too read 1.03..1.12 (the flow transmitter shows the new load torque
     ///   late), and 1.12 cost the ×1 valve step 12 % more IAE.
-    ///
-    /// The lag probe's model of the plant takes the factor as measured, lighter rotors too:
-    /// on half the paper's J the plant ran ahead of the paper's τ, the probe read a 150 ms
-    /// flow transmitter as 20 ms, and the lag the error assumes, bounded by twice that
-    /// ([`LAG_MARGIN`]), overshot 13.6 %.
     pub fn set_inertia(&mut self, factor: f32) {
-        let finite = factor.is_finite() && factor > 0.0;
-        self.inertia = if factor >= INERTIA_USED_FROM && finite {
+        self.inertia = if factor >= INERTIA_USED_FROM && factor.is_finite() {
             factor
         } else {
             1.0
         };
-        self.plant_inertia = if finite { factor } else { 1.0 };
     }
 
     /// The reference is on its way to a new setpoint (more than [`MOVING_FRACTION`] of it
@@ -542,20 +520,7 @@ impl Regulator {
                 Controlled::Pressure => ControlSettings::DEFAULT.pressure_lag_s,
                 Controlled::Flow => ControlSettings::DEFAULT.flow_lag_s,
             };
-            // A lag measured and kept bounds the setting from above: at most
-            // [`LAG_MARGIN`] times it. A transmitter faster than the setting (or its
-            // default) otherwise made the loop slower than the plant allows: flow steps with
-            // a 40 ms transmitter against the 250 ms default rose in 0.80 s (target 0.7),
-            // 0.45 s once the first step had measured 38 ms.
-            let kept = LAG_MARGIN * self.probe.kept_s;
-            self.calmed(
-                if kept > 0.0 && kept < lag_s {
-                    kept
-                } else {
-                    lag_s
-                },
-                default,
-            )
+            self.calmed(lag_s, default)
         } else {
             lag_s
         };
@@ -684,7 +649,7 @@ impl Regulator {
         // λ as asked (below the default too), but never under twice the lag measured, and
         // beyond what the defaults cover at least the default calmed (a review: λ = 60 ms on
         // a plant lagging 95 ms overshot 41 %).
-        let floor = LAG_MARGIN * self.probe.lag_s;
+        let floor = 2.0 * self.probe.lag_s;
         let lambda = self.calmed(if asked > floor { asked } else { floor }, default);
         (
             inv.torque_ref_pct,
@@ -693,10 +658,7 @@ impl Regulator {
                 kc: tau / (gain * lambda),
                 ti_s: tau * INTEGRAL_TIME_PER_TAU,
             },
-            {
-                let tau = l.time_constant_s * self.plant_inertia;
-                (gain.is_finite() && tau.is_finite() && tau > 0.0).then_some((gain, tau))
-            },
+            (gain.is_finite() && tau.is_finite() && tau > 0.0).then_some((gain, tau)),
         )
     }
 }
@@ -879,32 +841,6 @@ mod tests {
                 "a NaN model restarts"
             );
         }
-    }
-
-    /// A lesson's lag bounds the lag the error assumes only once kept: while its move lasts
-    /// and through its probation `kept_s` holds; when the probation ends it takes the lag; a
-    /// lesson a valve step undoes leaves it as it was.
-    #[test]
-    fn only_a_kept_lesson_bounds_the_assumed_lag() {
-        let load = paper_load(&BenchParams::<f32>::PAPER);
-        let mut p = LagProbe::new(3.0, COVERED_LAG_PRESSURE_S);
-        assert!(!p.learns(3.0, load, false), "a start is no step");
-        assert!(p.learns(4.0, load, true), "a step's move teaches");
-        p.set_lag(0.05);
-        for k in 1..LESSON_PROBATION_PERIODS {
-            assert!(!p.learns(4.0, load, false));
-            assert_eq!(p.kept_s, 0.0, "period {k} of the probation");
-        }
-        p.learns(4.0, load, false);
-        assert_eq!(p.kept_s, 0.05, "kept");
-        assert!(p.learns(2.0, load, true));
-        p.set_lag(0.02);
-        let valve = Load {
-            valve_k2: load.valve_k2 * 1.3,
-            ..load
-        };
-        assert!(!p.learns(2.0, valve, false), "undone");
-        assert_eq!((p.lag_s, p.kept_s), (0.05, 0.05));
     }
 
     /// The probe through the loop, on the white-box bench whose pressure reading is delayed

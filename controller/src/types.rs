@@ -93,9 +93,7 @@ pub struct ControlSettings {
     /// The loops' law.
     pub law: ControlLaw,
     /// The pressure transmitter's time constant (its damping), s (0..=10): the loop compares
-    /// the reading with its reference lagged as much (with the model law, at most
-    /// [`crate::regulate::LAG_MARGIN`] times the lag it measured on a setpoint step, once it
-    /// has).
+    /// the reading with its reference lagged as much.
     pub pressure_lag_s: f32,
     /// The flow transmitter's time constant, s (0..=10).
     pub flow_lag_s: f32,
