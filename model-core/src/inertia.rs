@@ -12,9 +12,9 @@
 //! predicts the speed change `x = a ∫ (Te − TL) dt` (trapezoid; `a` the paper's rpm/s per % of
 //! surplus torque, TL the load-torque curve at the measured flow with the observer's torque
 //! scale); the speed measured changes by `y`. The inertia is
-//! `f = Σ x² / Σ x y` times the paper's over the intervals, by least squares without
-//! forgetting (an inertia does not change in service; the speed's noise is in `y` alone and
-//! averages out). Only moves carry information: steady, `x ≈ 0` adds nothing. Until the sums
+//! `f = Σ x² / Σ x y` times the paper's over the intervals, by least squares (an inertia
+//! does not change in service: the sums are only halved, ratio kept, when they grow large;
+//! the speed's noise is in `y` alone and averages out). Only moves carry information: steady, `x ≈ 0` adds nothing. Until the sums
 //! hold [`InertiaProbe::EVIDENCE_RPM2`] the factor is 1 (the paper's J).
 //!
 //! What biases it: a drive that reports its torque reference rather than its torque (a
@@ -127,10 +127,9 @@ impl<T: Real> InertiaProbe<T> {
         let (dw, dt) = moved;
         // x: the speed change the paper's J predicts (trapezoid), y = dw the one measured.
         let x = T::from_f64(0.5) * (a0 + self.last_predicted) * dt;
-        let (xx, xy) = (x * x, x * dw);
-        // Not learning, no last reading learnt from, or a value not finite: `xy` is NaN or
-        // infinite.
-        let yy = dw * dw;
+        let (xx, xy, yy) = (x * x, x * dw, dw * dw);
+        // Not learning, no last reading learnt from, or a value not finite: `xy` or `yy` is
+        // NaN or infinite.
         if xy.is_finite() && yy.is_finite() && dt <= T::from_f64(Self::MAX_GAP_S) {
             self.sums[0] += xx;
             self.sums[1] += xy;
