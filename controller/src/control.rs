@@ -527,6 +527,8 @@ pub struct Controller<const NP: usize, const HP: usize, const NF: usize, const H
     stop_writes_seen: u16,
     /// The overspeed limit last handed to the monitor, rpm (0: none yet).
     overspeed_set_rpm: u16,
+    /// The speed the protection checked this step, rpm.
+    protect_speed_rpm: f32,
     protection: Protection,
     /// The torque is held at 0 % this step (tripped, or not yet restarted).
     hold: bool,
@@ -629,6 +631,7 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             vfd_reads_seen: 0,
             stop_writes_seen: 0,
             overspeed_set_rpm: 0,
+            protect_speed_rpm: 0.0,
             protection: Protection::new(),
             hold: false,
             protect_reads: (0, 0),
@@ -759,6 +762,7 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
                 .set_overspeed_limit_rpm(f32::from(c.protection.overspeed_rpm));
         }
         self.monitor.check_speed(dt, speed);
+        self.protect_speed_rpm = speed;
         let ack = c.stop_writes != self.stop_writes_seen;
         if ack {
             // SCADA wrote "stop": the operator's acknowledge of latched alarms and a trip,
@@ -945,6 +949,10 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             Regulator::new(controlled, measured, applied, v.speed_rpm).with_lag(lag_s)
         });
         r.set_inertia(self.inertia_factor);
+        r.set_speed_limit(
+            f32::from(inp.commands.protection.overspeed_rpm),
+            self.protect_speed_rpm,
+        );
         let o = r.step(self.whitebox.params(), v.load, s, setpoint, measured);
         self.measured_lag_s[k] = o.lag_s;
         o.torque_pct

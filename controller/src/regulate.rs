@@ -40,6 +40,8 @@
 //! so the two never share a 1 ms step (the step's worst case stays the observer's).
 
 use crate::types::{ControlLaw, ControlSettings};
+use model_core::equations::{flow_balance, system_k, valve_pressure_mca};
+use model_core::flow::solve_flow;
 use model_core::inverse::{linearise, steady_torque_near, Load, SteadyInverse, Target};
 use model_core::BenchParams;
 
@@ -102,6 +104,12 @@ pub struct PiGains {
 /// The rotor's inertia measured ([`model_core::inertia`], × the paper's) from which the model's
 /// time constant follows it ([`Regulator::set_inertia`]).
 pub const INERTIA_USED_FROM: f32 = 1.2;
+
+/// The fraction of the overspeed limit the model-based loop's reference asks at most
+/// ([`Regulator::set_speed_limit`]): 96 %, 1 848 rpm under the default 1 925. The margin
+/// takes the model's speed error at the point (a curve 5 % off moves the steady speed of a
+/// pressure by ≈ 2.5 %) and the loop's own overshoot.
+pub const SPEED_LIMIT_FRACTION: f32 = 0.96;
 
 /// [`ControlLaw::Pi`]'s pressure gains: the loop's rule (λ = [`PRESSURE_CLOSED_LOOP_S`],
 /// [`INTEGRAL_TIME_PER_TAU`]) on the paper's bench linearised at 3 mca with the paper's valve
@@ -350,6 +358,10 @@ pub struct Regulator {
     inertia: f32,
     /// The reference was more than [`MOVING_FRACTION`] of the setpoint from it last period.
     moving: bool,
+    /// The highest speed the reference may ask of the model, rpm (infinite: none).
+    speed_cap_rpm: f32,
+    /// The speed now (the drive's reading, else the observer's), rpm.
+    speed_rpm: f32,
     last: RegulatorOutput,
 }
 
@@ -374,6 +386,8 @@ impl Regulator {
             seen_reference: measured,
             inertia: 1.0,
             moving: false,
+            speed_cap_rpm: f32::INFINITY,
+            speed_rpm: 0.0,
             probe: LagProbe::new(
                 measured,
                 match controlled {
@@ -428,6 +442,24 @@ impl Regulator {
             factor
         } else {
             1.0
+        };
+    }
+
+    /// The overspeed limit, rpm (the protection's, holding register 5), and the speed now
+    /// (the drive's reading, else the observer's), rpm: a setpoint beyond what the pump gives
+    /// under the limit holds the pump under it instead of tripping it. The reference goes no
+    /// further than the value `measured` while the speed is over [`SPEED_LIMIT_FRACTION`] of
+    /// the limit (both laws), and with the model (law 0) no further than what the pump gives
+    /// at that speed on the load the observer estimates (the flow balance there), once the
+    /// speed is over 90 % of it and the model's steady state for the reference within 2 % of
+    /// it, unless that steady state needs more than 100 % torque (the torque limit then binds
+    /// first). A limit not a number or ≤ 0: no cap.
+    pub fn set_speed_limit(&mut self, overspeed_rpm: f32, speed_rpm: f32) {
+        self.speed_rpm = speed_rpm;
+        self.speed_cap_rpm = if overspeed_rpm > 0.0 {
+            overspeed_rpm * SPEED_LIMIT_FRACTION
+        } else {
+            f32::INFINITY
         };
     }
 
@@ -496,8 +528,11 @@ impl Regulator {
         if !into_limit {
             self.reference += (setpoint - self.reference) * a;
         }
+        // No further than the speed limit allows (the reference then waits there, as at a
+        // torque limit).
+        let capped = self.cap_reference(bench, load, s.law, measured);
         // The reference's rate, for the feedforward's dynamic part.
-        let rate = if a < 1.0 && !into_limit {
+        let rate = if a < 1.0 && !into_limit && !capped {
             (setpoint - self.reference) / s.setpoint_filter_s
         } else {
             0.0
@@ -555,7 +590,8 @@ impl Regulator {
         // from it. (The error while the rate limit and the lags the model lacks hold the
         // plant behind the reference, integrated, overshot 6 to 9 % on a plant with a 50 ms
         // drive lag and a 60 ms transmitter, and 27 to 36 % with a water column.)
-        self.moving = (setpoint - self.reference).abs() > MOVING_FRACTION * setpoint.abs().max(0.1);
+        self.moving = !capped
+            && (setpoint - self.reference).abs() > MOVING_FRACTION * setpoint.abs().max(0.1);
         let moving = s.law == ControlLaw::Model && self.moving;
         let held = limited && (wanted - torque) * di > 0.0;
         if !(held || moving) {
@@ -582,6 +618,53 @@ impl Regulator {
             lag_s: self.probe.lag_s,
         };
         self.last
+    }
+
+    /// Lowers the reference to what the pump gives at the speed cap on the load the observer
+    /// estimates now, once the last period's steady state for it came within 2 % of the cap
+    /// (so not a flow solve every period), and, while the speed is over the cap (a
+    /// transient, or the model wrong), to the value `measured` now. Returns whether it did.
+    fn cap_reference(
+        &mut self,
+        bench: &BenchParams<f32>,
+        load: Load<f32>,
+        law: ControlLaw,
+        measured: f32,
+    ) -> bool {
+        let cap = self.speed_cap_rpm;
+        let mut most = if self.speed_rpm > cap {
+            // The affinity laws: the pump's pressure goes as the speed squared, its flow as
+            // the speed (a system curve through the origin): the value at the cap.
+            let r = cap / self.speed_rpm;
+            match self.controlled {
+                Controlled::Pressure => measured * r * r,
+                Controlled::Flow => measured * r,
+            }
+        } else {
+            f32::INFINITY
+        };
+        if law == ControlLaw::Model
+            && self.speed_rpm > 0.9 * cap
+            && self.near.speed_rpm > 0.98 * cap
+            && !self.near.limited
+        {
+            let k = system_k(bench.pipe_k1, load.valve_k2);
+            let c = bench.static_head_c_mca;
+            let g = flow_balance(&bench.alpha, load.head_scale, k, c, cap);
+            let q = solve_flow(&g, self.near.flow_lps).flow_lps;
+            let at_cap = match self.controlled {
+                Controlled::Pressure => valve_pressure_mca(load.valve_k2, c, q),
+                Controlled::Flow => q,
+            };
+            // (`min` passes over a NaN.)
+            most = most.min(at_cap);
+        }
+        if self.reference > most {
+            self.reference = most;
+            true
+        } else {
+            false
+        }
     }
 
     /// How much calmer than its defaults the loop runs for the lag measured: 1 up to the
@@ -1115,6 +1198,57 @@ mod tests {
             assert!(settle <= if up { 1.0 } else { 2.5 }, "{model:?}");
             if up {
                 assert!(settle < pi_settle, "{model:?} vs {pi:?}");
+            }
+        }
+    }
+
+    /// A setpoint beyond the speed limit (4 mca asked with the overspeed limit at 1 400 rpm,
+    /// a cap of 1 344 rpm; 4 mca needs ≈ 1 500 rpm on the paper's bench): the model-based
+    /// loop's reference stops at the pressure the model gives at the cap and the white-box
+    /// bench settles there; the PI alone's follows the reading while the speed is over the
+    /// cap, and the bench stays under the limit; without a limit both reach 4 mca.
+    #[test]
+    fn the_reference_stops_at_the_speed_limit() {
+        for law in [ControlLaw::Model, ControlLaw::Pi] {
+            let s = ControlSettings {
+                law,
+                ..ControlSettings::DEFAULT
+            };
+            for limit in [Some(1400.0f32), None] {
+                let (p, bench, load, u0, mut st, mut seen) = bench_at(2.0);
+                let mut reg = Regulator::new(Controlled::Pressure, seen, u0, st.speed_rpm);
+                let mut u = u0;
+                let mut most = 0.0f32;
+                for k in 0..6000u32 {
+                    if k % CONTROL_PERIOD_MS == 0 {
+                        if let Some(l) = limit {
+                            reg.set_speed_limit(l, st.speed_rpm);
+                        }
+                        u = reg.step(&p, load, &s, 4.0, seen).torque_pct;
+                    }
+                    bench.step(&mut st, u, 1e-3, Scheme::Rk4).unwrap();
+                    lag_1ms(&mut seen, bench.signals(&st).pressure_mca, 0.02);
+                    most = most.max(st.speed_rpm);
+                }
+                let end = bench.signals(&st).pressure_mca;
+                let cap = 1400.0 * SPEED_LIMIT_FRACTION;
+                match (limit, law) {
+                    (Some(l), ControlLaw::Model) => {
+                        assert!(
+                            most < l && (st.speed_rpm - cap).abs() < 5.0,
+                            "{most} {st:?}"
+                        );
+                        let r = reg.last().reference;
+                        assert!(end < 3.9 && (r - end).abs() < 0.02, "{end} {r}");
+                    }
+                    (Some(l), ControlLaw::Pi) => {
+                        assert!(
+                            most < l && (st.speed_rpm - cap).abs() < 15.0,
+                            "{most} {st:?}"
+                        );
+                    }
+                    (None, _) => assert!((end - 4.0).abs() < 0.01 && most > 1400.0, "{end} {most}"),
+                }
             }
         }
     }

@@ -160,7 +160,7 @@ pub struct ControlArgs {
     /// refused with it: the external plant is the plant.
     #[arg(long, conflicts_with_all = [
         "scenario", "controller", "targets", "output", "plot", "set", "seed", "hold_s",
-        "flow_lag_ms", "curve_error", "water_inertia", "drive_lag_ms", "rotor_inertia",
+        "flow_lag_ms", "curve_error", "curve_shape", "water_inertia", "drive_lag_ms", "rotor_inertia",
         "pressure_lag_ms",
     ])]
     pub plant_stdio: bool,
@@ -500,6 +500,19 @@ pub struct PlantArgs {
         allow_hyphen_values = true
     )]
     pub curve_error: String,
+    /// Curve shape error PCT, % (-50..50), on top of --curve-error: the TRUE pump-head
+    /// curve's six terms in the flow Q (alpha 1, 3, 4, 5, 7, 8) times (1 + PCT/100), the
+    /// load-torque curve's (the same beta) times (1 - PCT/100); the values at no flow stay.
+    /// PCT > 0: a head that falls more steeply with the flow than the paper's fit (its
+    /// terms in Q pull it down) and a torque that rises less; a shape no curve scale
+    /// absorbs. HEAD_PCT,TORQUE_PCT sets them apart.
+    #[arg(
+        long,
+        value_name = "PCT|HEAD_PCT,TORQUE_PCT",
+        default_value = "0",
+        allow_hyphen_values = true
+    )]
+    pub curve_shape: String,
     /// Water-column inertia L, mca·s²/l (0, or 0.001..10): the flow becomes a state,
     /// L dQ/dt = F_H(ω, Q) − (k1 + k2²) Q² + c. 0 keeps the paper's algebraic flow (and
     /// the record's bytes).

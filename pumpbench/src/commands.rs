@@ -192,7 +192,15 @@ pub fn plant_options(
 ) -> Result<plant::PlantOptions, Failure> {
     Ok(plant::PlantOptions {
         seed,
-        curve_error: plant::parse_curve_error(&a.curve_error).map_err(Failure::usage)?,
+        curve_error: {
+            let (head_shape_pct, torque_shape_pct) =
+                plant::parse_curve_shape(&a.curve_shape).map_err(Failure::usage)?;
+            plant::CurveError {
+                head_shape_pct,
+                torque_shape_pct,
+                ..plant::parse_curve_error(&a.curve_error).map_err(Failure::usage)?
+            }
+        },
         dynamics: plant::Dynamics {
             water_inertia: plant::parse_water_inertia(&a.water_inertia).map_err(Failure::usage)?,
             drive_lag_s: plant::parse_lag_ms("--drive-lag-ms", &a.drive_lag_ms)

@@ -1440,11 +1440,13 @@ pub fn command(a: ControlArgs) -> Result<(), Failure> {
     }
     bar.finish_and_clear();
     let plant_text = format!(
-        "plant: curve error {},{} %, rotor inertia {} × the paper's, water inertia {} mca·s²/l, \
+        "plant: curve error {},{} %, curve shape {},{} %, rotor inertia {} × the paper's, water inertia {} mca·s²/l, \
          drive lag {} ms, pressure lag {} ms, flow lag {} ms, seed {}",
         // (+ 0.0: a curve error of 0 is written 0, not -0.)
         Short(o.curve_error.head_pct + 0.0),
         Short(o.curve_error.torque_pct + 0.0),
+        Short(o.curve_error.head_shape_pct + 0.0),
+        Short(o.curve_error.torque_shape_pct + 0.0),
         Short(o.rotor_inertia),
         Short(o.dynamics.water_inertia),
         Short(o.dynamics.drive_lag_s * 1000.0),

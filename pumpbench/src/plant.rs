@@ -28,7 +28,10 @@
 //! The bench can differ from the paper's model: its valve coefficient k2 set to a factor of
 //! the paper's 0.1082 √mca/(l/s) at any time ([`Plant::set_valve_factor`]), and a curve error
 //! ([`CurveError`], [`true_bench`]): the true pump-head curve F_H (eq. 5, all ten α) and the
-//! true load-torque curve F_T (eq. 6, all ten β) are the paper's times their own factors.
+//! true load-torque curve F_T (eq. 6, all ten β) are the paper's times their own factors, and
+//! each curve's shape can differ: its six terms in the flow ([`FLOW_TERMS`]) times a factor of
+//! their own (a head that falls faster or slower with the flow than the paper's fit, a torque
+//! that rises faster or slower), which no single scale absorbs.
 //!
 //! For a controller in the loop ([`Plant::frame`]) the plant shows the two transmitters' ADC
 //! codes (a failed transmitter reads [`FAULT_MA`], an NE 43 fault) and the drive's readings
@@ -123,6 +126,9 @@ pub const VALVE_FACTOR_MIN: f64 = 0.2;
 pub const VALVE_FACTOR_MAX: f64 = 5.0;
 /// Largest |curve error| accepted, %.
 pub const CURVE_ERROR_MAX_PCT: f64 = 20.0;
+/// Largest |curve shape error| accepted, % (the head curve's terms in Q at +50 % lower the head by
+/// 4..10 % from 8 to 15 l/s at 1 400..1 800 rpm: a curve of another slope).
+pub const CURVE_SHAPE_MAX_PCT: f64 = 50.0;
 /// Longest transmitter lag accepted, ms.
 pub const LAG_MAX_MS: f64 = 2000.0;
 /// Smallest non-zero water inertia accepted, mca·s²/l (below it the flow's time constant is
@@ -133,13 +139,20 @@ pub const INERTIA_MAX: f64 = 10.0;
 /// The rotor inertias accepted, × the paper's.
 pub const ROTOR_INERTIA_RANGE: (f64, f64) = (0.25, 4.0);
 
-/// A curve error: the true curves are the paper's times `1 + pct/100`, each on its own.
+/// A curve error: the true curves are the paper's times `1 + pct/100`, each on its own
+/// (scale), and their terms in the flow times `1 + shape_pct/100` (shape).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CurveError {
     /// Pump head F_H (eq. 5, all ten α), %.
     pub head_pct: f64,
     /// Load torque F_T (eq. 6, all ten β), %.
     pub torque_pct: f64,
+    /// Pump head F_H's shape: its six terms in Q ([`FLOW_TERMS`]) times `1 + head_shape_pct/100`
+    /// on top of the scale, %; the shut-off head F_H(ω, 0) stays the scaled paper's.
+    pub head_shape_pct: f64,
+    /// Load torque F_T's shape: its six terms in Q times `1 + torque_shape_pct/100`, %; the
+    /// torque at no flow F_T(ω, 0) stays the scaled paper's.
+    pub torque_shape_pct: f64,
 }
 
 impl CurveError {
@@ -147,8 +160,14 @@ impl CurveError {
     pub const NONE: Self = Self {
         head_pct: 0.0,
         torque_pct: 0.0,
+        head_shape_pct: 0.0,
+        torque_shape_pct: 0.0,
     };
 }
+
+/// The indices of eq. (5)/(6)'s ten coefficients whose terms hold the flow Q (`p1 Q³`,
+/// `p3 Q²ω`, `p4 Qω²`, `p5 Q²`, `p7 Qω`, `p8 Q`; 0-based): what a curve's shape error scales.
+pub const FLOW_TERMS: [usize; 6] = [0, 2, 3, 4, 6, 7];
 
 /// Dynamics the paper's model lacks (0: not there).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -179,34 +198,46 @@ fn finite(option: &str, text: &str) -> Result<f64, String> {
 }
 
 /// Parses `--curve-error PCT` (head +PCT, load torque −PCT) or `--curve-error H,T` (head H,
-/// load torque T): each finite, |·| ≤ [`CURVE_ERROR_MAX_PCT`].
+/// load torque T): each finite, |·| ≤ [`CURVE_ERROR_MAX_PCT`]. The shapes are the paper's.
 pub fn parse_curve_error(text: &str) -> Result<CurveError, String> {
+    let (head_pct, torque_pct) = parse_pct_pair("--curve-error", text, CURVE_ERROR_MAX_PCT)?;
+    Ok(CurveError {
+        head_pct,
+        torque_pct,
+        ..CurveError::NONE
+    })
+}
+
+/// Parses `--curve-shape PCT` (the head curve's flow terms +PCT, the load torque's −PCT) or
+/// `--curve-shape H,T`: each finite, |·| ≤ [`CURVE_SHAPE_MAX_PCT`]. Returns
+/// `(head_shape_pct, torque_shape_pct)` ([`CurveError`]).
+pub fn parse_curve_shape(text: &str) -> Result<(f64, f64), String> {
+    parse_pct_pair("--curve-shape", text, CURVE_SHAPE_MAX_PCT)
+}
+
+/// `PCT` as `(PCT, −PCT)` or `H,T` as `(H, T)`, each finite and within ±`max_pct`; the
+/// message names `option`.
+fn parse_pct_pair(option: &str, text: &str, max_pct: f64) -> Result<(f64, f64), String> {
     let one = |t: &str| -> Result<f64, String> {
-        let pct = finite("--curve-error", t)?;
-        if pct.abs() <= CURVE_ERROR_MAX_PCT {
+        let pct = finite(option, t)?;
+        if pct.abs() <= max_pct {
             Ok(pct)
         } else {
             Err(format!(
-                "--curve-error {}: must be within -{m}..{m} %",
+                "{option} {}: must be within -{m}..{m} %",
                 Short(pct),
-                m = Short(CURVE_ERROR_MAX_PCT)
+                m = Short(max_pct)
             ))
         }
     };
     match text.split_once(',') {
         None => {
             let pct = one(text)?;
-            Ok(CurveError {
-                head_pct: pct,
-                torque_pct: -pct,
-            })
+            Ok((pct, -pct))
         }
-        Some((h, t)) if !t.contains(',') => Ok(CurveError {
-            head_pct: one(h)?,
-            torque_pct: one(t)?,
-        }),
+        Some((h, t)) if !t.contains(',') => Ok((one(h)?, one(t)?)),
         Some(_) => Err(format!(
-            "--curve-error '{}': expected PCT or HEAD_PCT,TORQUE_PCT",
+            "{option} '{}': expected PCT or HEAD_PCT,TORQUE_PCT",
             shown(text)
         )),
     }
@@ -262,21 +293,33 @@ pub fn parse_lag_ms(option: &str, text: &str) -> Result<f64, String> {
 
 /// The true bench for a curve error: the paper's parameters with every α (pump head F_H,
 /// eq. 5) times (1 + head_pct/100) and every β (load torque F_T, eq. 6) times
-/// (1 + torque_pct/100), and its rotor's inertia J the paper's times `rotor_inertia`.
-/// [`CurveError::NONE`] and 1 give the paper's bench exactly. The message (one line) says why
-/// the parameters are refused.
+/// (1 + torque_pct/100), then the α and β of the terms in Q ([`FLOW_TERMS`]) times
+/// (1 + head_shape_pct/100) and (1 + torque_shape_pct/100), and its rotor's inertia J the
+/// paper's times `rotor_inertia`. [`CurveError::NONE`] and 1 give the paper's bench exactly.
+/// The message (one line) says why the parameters are refused.
 pub fn true_bench(e: CurveError, rotor_inertia: f64) -> Result<WhiteBox<f64>, String> {
     let mut p = BenchParams::<f64>::paper();
     let head = 1.0 + e.head_pct / 100.0;
     let load = 1.0 + e.torque_pct / 100.0;
     p.alpha.iter_mut().for_each(|a| *a *= head);
     p.beta.iter_mut().for_each(|b| *b *= load);
+    let (head_shape, load_shape) = (
+        1.0 + e.head_shape_pct / 100.0,
+        1.0 + e.torque_shape_pct / 100.0,
+    );
+    for i in FLOW_TERMS {
+        p.alpha[i] *= head_shape;
+        p.beta[i] *= load_shape;
+    }
     p.inertia_kg_m2 *= rotor_inertia;
     WhiteBox::new(p).map_err(|err| {
         format!(
-            "--curve-error {},{}: the scaled pump-head and load-torque curves are refused: {err}",
+            "--curve-error {},{} --curve-shape {},{}: the pump-head and load-torque curves are \
+             refused: {err}",
             Short(e.head_pct),
-            Short(e.torque_pct)
+            Short(e.torque_pct),
+            Short(e.head_shape_pct),
+            Short(e.torque_shape_pct)
         )
     })
 }
@@ -653,6 +696,7 @@ impl Plant {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use model_core::equations::pump_head_mca;
 
     #[test]
     fn quantisation_step_and_noise_level() {
@@ -705,6 +749,44 @@ mod tests {
     }
 
     #[test]
+    fn curve_shape_scales_the_terms_in_the_flow_only() {
+        let paper = WhiteBox::<f64>::paper();
+        let (h, t) = parse_curve_shape("30,-40").unwrap();
+        let e = CurveError {
+            head_shape_pct: h,
+            torque_shape_pct: t,
+            ..parse_curve_error("5").unwrap()
+        };
+        let b = true_bench(e, 1.0).unwrap();
+        let (p, p0) = (b.params(), paper.params());
+        for i in 0..10 {
+            let flow_term = FLOW_TERMS.contains(&i);
+            let (a, x) = if flow_term { (1.3, 0.6) } else { (1.0, 1.0) };
+            assert_eq!(p.alpha[i], p0.alpha[i] * 1.05 * a, "alpha {i}");
+            assert_eq!(p.beta[i], p0.beta[i] * 0.95 * x, "beta {i}");
+        }
+        // At no flow the curves are the scaled paper's; with flow, of another shape: the
+        // head at 1 700 rpm falls faster from 8 to 15 l/s than the scaled paper's does.
+        let head = |p: &BenchParams<f64>, q| pump_head_mca(&p.alpha, 1700.0, q);
+        assert!((head(p, 0.0) / head(p0, 0.0) - 1.05).abs() < 1e-12);
+        let ratio = |q| head(p, q) / head(p0, q) / 1.05;
+        assert!(ratio(8.0) < 0.99 && ratio(15.0) < ratio(8.0) - 0.01);
+        // The default is the paper's bench, bit for bit; the bounds and the form are checked.
+        assert_eq!(parse_curve_shape("0").unwrap(), (0.0, -0.0));
+        assert_eq!(parse_curve_shape("50,-50").unwrap(), (50.0, -50.0));
+        for text in ["51", "1,-50.5", "x", "1,2,3", ""] {
+            let e = parse_curve_shape(text).unwrap_err();
+            assert!(e.starts_with("--curve-shape"), "{e}");
+        }
+        let zero = CurveError {
+            head_shape_pct: 0.0,
+            torque_shape_pct: -0.0,
+            ..CurveError::NONE
+        };
+        assert_eq!(true_bench(zero, 1.0).unwrap(), paper);
+    }
+
+    #[test]
     fn curve_error_scales_every_alpha_up_and_every_beta_down() {
         let paper = BenchParams::<f64>::paper();
         let b = true_bench(parse_curve_error("5").unwrap(), 1.0).unwrap();
@@ -738,6 +820,7 @@ mod tests {
                 CurveError {
                     head_pct: pct,
                     torque_pct: -pct,
+                    ..CurveError::NONE
                 },
                 1.0,
             )

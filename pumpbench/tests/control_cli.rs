@@ -372,6 +372,48 @@ fn a_heavy_rotor_coasting_is_not_a_dry_pump() {
     );
 }
 
+/// A pump whose head falls faster with the flow and whose load torque rises slower than the
+/// paper's fits (`--curve-shape 30,-30`), holding 3 mca while the valve opens to ×0.7: the
+/// setpoint is beyond what the pump gives under its overspeed limit (1 925 rpm by default).
+/// Without the loops' speed cap both laws ran the pump into the overspeed trip (latched: 0 %
+/// for the rest of the run; the model-based loop 9.2 s, the PI alone 9.1 s); with it, the
+/// reference stops where the speed reaches 96 % of the limit and nothing trips.
+#[test]
+fn a_setpoint_beyond_the_speed_limit_does_not_trip_the_pump() {
+    let dir = tempfile::tempdir().unwrap();
+    let csv = dir.path().join("run.csv");
+    let csv_text = csv.display().to_string();
+    let out = pumpbench(&[
+        "control",
+        "--scenario",
+        "valve-steps",
+        "--curve-shape",
+        "30,-30",
+        "--output",
+        &csv_text,
+    ]);
+    let stdout = ok(&out, "control");
+    assert_eq!(
+        stdout
+            .matches("tripped (a protection's 0 %) 0.000 s")
+            .count(),
+        2,
+        "{stdout}"
+    );
+    let run = Table::parse(&std::fs::read_to_string(&csv).unwrap());
+    for law in [0.0, 1.0] {
+        let most = run
+            .col("law")
+            .iter()
+            .zip(run.col("speed_true"))
+            .filter(|(l, _)| **l == law)
+            .map(|(_, w)| w)
+            .fold(0.0, f64::max);
+        // Up to the cap (1 848 rpm), under the limit: the setpoint was beyond the cap.
+        assert!((1840.0..1900.0).contains(&most), "law {law}: {most}");
+    }
+}
+
 /// `--plant-stdio` with an option of the built-in plant or scenario: refused (exit code 2,
 /// nothing served), not silently ignored (a plant option once ran the external plant with
 /// nothing said).
@@ -380,6 +422,7 @@ fn plant_stdio_refuses_the_built_in_plants_options() {
     for opt in [
         ["--rotor-inertia", "2"],
         ["--curve-error", "5"],
+        ["--curve-shape", "5"],
         ["--water-inertia", "0.1"],
         ["--drive-lag-ms", "20"],
         ["--pressure-lag-ms", "60"],
