@@ -382,6 +382,11 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
     /// The control task's part of a millisecond: [`Controller::step`], its outputs to the
     /// bench (torque, valve, faults), the bench stepped 1 ms (publishing to SCADA and the VFD
     /// pass are the lower-priority tasks' part, [`Self::tick_with`]).
+    // Always inlined (into the QEMU board's control task, its one caller on the MCU): left to
+    // LLVM, a change elsewhere in the controller once moved the task's body into SysTick and
+    // this function out of it, 1 254 B more flash (`cargo xtask bench`), the image over its
+    // budget.
+    #[inline(always)]
     pub fn control(
         controller: &mut Controller<NP, HP, NF, HF>,
         io: &mut VirtualIo,

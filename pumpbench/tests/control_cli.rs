@@ -400,6 +400,15 @@ fn a_setpoint_beyond_the_speed_limit_does_not_trip_the_pump() {
         2,
         "{stdout}"
     );
+    // The valve back to ×1 after the capped ×0.7: the model law's reference returns to 3 mca
+    // as after any valve step (the integral not held as for a setpoint move: 1.24 s then).
+    let back: Vec<&str> = stdout
+        .lines()
+        .filter(|l| l.trim_start().starts_with("back within 2 % (s)"))
+        .collect();
+    assert_eq!(back.len(), 4, "{stdout}");
+    let model_back: f64 = back[3].split_whitespace().nth(5).unwrap().parse().unwrap();
+    assert!(model_back <= 1.0, "{}", back[3]);
     let run = Table::parse(&std::fs::read_to_string(&csv).unwrap());
     for law in [0.0, 1.0] {
         let most = run
