@@ -39,6 +39,9 @@
 //!   β) times (1 − PCT/100): PCT > 0 is a stronger pump and a lighter load than the paper's
 //!   fits, PCT < 0 a weaker pump and a heavier load; `--curve-error H,T` sets the two apart:
 //!   F_H times (1 + H/100), F_T times (1 + T/100) (so `5` is `5,-5`);
+//! - a curve shape (`--curve-shape PCT` or `H,T`, ±50 %): on top of that, the six terms in the
+//!   flow of F_H times (1 + H/100) and of F_T times (1 + T/100), the values at no flow
+//!   unchanged (`crate::plant::FLOW_TERMS`);
 //! - `--truth` adds the bench's true state at each row's time (before lag, noise and
 //!   quantisation): `speed_true` (rpm), `flow_true` (l/s), `pressure_true` (mca) and
 //!   `k2_true` (√mca/(l/s)).
