@@ -363,13 +363,7 @@ fn a_heavy_rotor_coasting_is_not_a_dry_pump() {
         "4",
     ]);
     let stdout = ok(&out, "control");
-    assert_eq!(
-        stdout
-            .matches("tripped (a protection's 0 %) 0.000 s")
-            .count(),
-        2,
-        "{stdout}"
-    );
+    assert_neither_law_tripped(&stdout);
 }
 
 /// A pump whose head falls faster with the flow and whose load torque rises slower than the
@@ -393,13 +387,7 @@ fn a_setpoint_beyond_the_speed_limit_does_not_trip_the_pump() {
         &csv_text,
     ]);
     let stdout = ok(&out, "control");
-    assert_eq!(
-        stdout
-            .matches("tripped (a protection's 0 %) 0.000 s")
-            .count(),
-        2,
-        "{stdout}"
-    );
+    assert_neither_law_tripped(&stdout);
     // The valve back to ×1 after the capped ×0.7: the model law's reference returns to 3 mca
     // as after any valve step (the integral not held as for a setpoint move: 1.24 s then).
     let back: Vec<&str> = stdout
@@ -448,4 +436,15 @@ fn plant_stdio_refuses_the_built_in_plants_options() {
             "{opt:?}: {err}"
         );
     }
+}
+
+/// Both laws' runs held no protection's 0 % (`pumpbench control`'s per-law line).
+fn assert_neither_law_tripped(stdout: &str) {
+    assert_eq!(
+        stdout
+            .matches("tripped (a protection's 0 %) 0.000 s")
+            .count(),
+        2,
+        "{stdout}"
+    );
 }
