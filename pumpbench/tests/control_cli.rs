@@ -411,6 +411,54 @@ fn a_setpoint_beyond_the_speed_limit_does_not_trip_the_pump() {
     }
 }
 
+/// The speed cap's review: where overspeed only warns (holding register 6 without bit 1) there
+/// is no trip to keep out of and no cap (it held the pressure 10.6 % low); a light rotor with a
+/// water column whose reference the cap had cut, just after the VFD link's return, tripped
+/// when the feedforward's lead came back on the next period (5.48 s at 0 %).
+#[test]
+fn the_speed_cap_only_guards_a_trip_and_leads_nothing() {
+    let out = pumpbench(&[
+        "control",
+        "--scenario",
+        "valve-steps",
+        "--curve-shape",
+        "30,-30",
+        "--set",
+        "6=1",
+        "--targets",
+    ]);
+    let stdout = ok(&out, "control");
+    let steady: Vec<&str> = stdout
+        .lines()
+        .filter(|l| l.trim_start().starts_with("steady error (%)"))
+        .collect();
+    // The rows: start, ×1.3, ×1, ×0.7, ×1; at ×0.7 both laws hold 3 mca (over the limit).
+    assert_eq!(steady.len(), 5, "{stdout}");
+    for law in [3, 4] {
+        let e: f64 = steady[3]
+            .split_whitespace()
+            .nth(law)
+            .unwrap()
+            .parse()
+            .unwrap();
+        assert!(e.abs() < 0.1, "{}", steady[3]);
+    }
+    let out = pumpbench(&[
+        "control",
+        "--scenario",
+        "link-cut",
+        "--curve-error",
+        "5",
+        "--water-inertia",
+        "0.5",
+        "--drive-lag-ms",
+        "20",
+        "--rotor-inertia",
+        "0.25",
+    ]);
+    assert_neither_law_tripped(&ok(&out, "control"));
+}
+
 /// `--plant-stdio` with an option of the built-in plant or scenario: refused (exit code 2,
 /// nothing served), not silently ignored (a plant option once ran the external plant with
 /// nothing said).
