@@ -411,6 +411,36 @@ fn a_setpoint_beyond_the_speed_limit_does_not_trip_the_pump() {
     }
 }
 
+/// A setpoint step beyond the speed cap (2 → 4 mca, 4 mca needing ≈ 1 500 rpm, the overspeed
+/// limit written at 1 400 rpm, a 20 ms drive): the model law's rule on its steady state acts
+/// from 90 % of the cap while the reference heads for a new setpoint, and the pump stays under
+/// the limit (from 98 %, as after a valve step, it tripped at 1 401 rpm; a review).
+#[test]
+fn a_setpoint_step_beyond_the_speed_cap_does_not_trip() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = write(
+        dir.path(),
+        "s.csv",
+        "t_s,mode,setpoint,valve\n0,3,2,1\n3,3,4,1\n",
+    );
+    let out = pumpbench(&[
+        "control",
+        "--scenario",
+        &s,
+        "--controller",
+        "model",
+        "--set",
+        "5=1400",
+        "--drive-lag-ms",
+        "20",
+    ]);
+    let stdout = ok(&out, "control");
+    assert!(
+        stdout.contains("tripped (a protection's 0 %) 0.000 s"),
+        "{stdout}"
+    );
+}
+
 /// The speed cap's review: where overspeed only warns (holding register 6 without bit 1) there
 /// is no trip to keep out of and no cap (it held the pressure 10.6 % low); a light rotor with a
 /// water column whose reference the cap had cut, just after the VFD link's return, tripped
