@@ -655,8 +655,10 @@ impl Regulator {
     /// Returns whether it lowered the reference.
     fn cap_reference(&mut self, law: ControlLaw, measured: f32) -> bool {
         let cap = self.speed_cap_rpm;
-        // Neither rule acts under 90 % of the cap: the common case, out first.
-        if !(self.speed_rpm > 0.9 * cap) {
+        // Neither rule acts under 90 % of the cap: the common case, out first (a NaN speed
+        // too).
+        let near_cap = self.speed_rpm > 0.9 * cap;
+        if !near_cap {
             return false;
         }
         let at_cap = |value: f32, speed: f32| {
