@@ -356,7 +356,7 @@ pub struct Regulator {
     inertia: f32,
     /// The reference was more than [`MOVING_FRACTION`] of the setpoint from it last period.
     moving: bool,
-    /// The highest speed the reference may ask of the model, rpm (infinite: none).
+    /// The speed over which the reference is held down, rpm (infinite: none).
     speed_cap_rpm: f32,
     /// The setpoint the reference was last held under by the speed cap (its way back to it
     /// is no setpoint move).
@@ -498,7 +498,7 @@ impl Regulator {
             self.probe.m = measured;
             self.probe.lesson = None;
             // The climb back from the reading is a move (a review: kept, the cap's mark made
-            // it integrate, and the pressure overshot 7.2 % after a link cut, 3.3 % without).
+            // it integrate, and the pressure overshot 7.2 % after a link cut, 3.4 % without).
             self.capped_under = None;
         }
         if applied_pct.is_finite() {
