@@ -72,6 +72,12 @@ pub struct CubicInFlow<T> {
     pub c0: T,
 }
 
+/// The indices (0-based) of eq. (5)/(6)'s ten coefficients whose terms hold the flow Q
+/// (`p1 Q³`, `p3 Q²ω`, `p4 Qω²`, `p5 Q²`, `p7 Qω`, `p8 Q`): those
+/// [`CubicInFlow::from_poly`] puts in `c3`, `c2` and `c1`; the other four make the value at
+/// no flow. (What a curve's shape error scales on the host's test benches.)
+pub const FLOW_TERMS: [usize; 6] = [0, 2, 3, 4, 6, 7];
+
 impl<T: Real> CubicInFlow<T> {
     /// Eq. (5)/(6) form `p1 Q³ + p2 ω³ + p3 Q²ω + p4 Qω² + p5 Q² + p6 ω² + p7 Qω + p8 Q + p9 ω + p10`
     /// at the speed `speed_rpm`, as a cubic in Q.
@@ -380,6 +386,16 @@ mod tests {
     use super::*;
     use crate::params::*;
     use crate::BenchParams;
+
+    #[test]
+    fn flow_terms_are_those_that_vanish_at_no_flow() {
+        for i in 0..10 {
+            let mut p = [0.0f64; 10];
+            p[i] = 1.0;
+            let g = CubicInFlow::from_poly(&p, 1500.0);
+            assert_eq!(g.c0 == 0.0, FLOW_TERMS.contains(&i), "coefficient {i}");
+        }
+    }
 
     #[test]
     fn te_is_almost_the_reference() {

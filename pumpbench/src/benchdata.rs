@@ -41,7 +41,7 @@
 //!   F_H times (1 + H/100), F_T times (1 + T/100) (so `5` is `5,-5`);
 //! - a curve shape (`--curve-shape PCT` or `H,T`, ±50 %): on top of that, the six terms in the
 //!   flow of F_H times (1 + H/100) and of F_T times (1 + T/100), the values at no flow
-//!   unchanged (`crate::plant::FLOW_TERMS`);
+//!   unchanged (`model_core::equations::FLOW_TERMS`);
 //! - `--truth` adds the bench's true state at each row's time (before lag, noise and
 //!   quantisation): `speed_true` (rpm), `flow_true` (l/s), `pressure_true` (mca) and
 //!   `k2_true` (√mca/(l/s)).

@@ -47,6 +47,7 @@ use controller::plant::PlantFrame;
 use controller::vfd::VfdReadings;
 use model_core::equations::{
     electromagnetic_torque_pct, load_torque_pct, speed_derivative_rpm_per_s, valve_pressure_mca,
+    FLOW_TERMS,
 };
 use model_core::excitation::SplitMix64;
 use model_core::transmitter::lag_to;
@@ -164,10 +165,6 @@ impl CurveError {
         torque_shape_pct: 0.0,
     };
 }
-
-/// The indices of eq. (5)/(6)'s ten coefficients whose terms hold the flow Q (`p1 Q³`,
-/// `p3 Q²ω`, `p4 Qω²`, `p5 Q²`, `p7 Qω`, `p8 Q`; 0-based): what a curve's shape error scales.
-pub const FLOW_TERMS: [usize; 6] = [0, 2, 3, 4, 6, 7];
 
 /// Dynamics the paper's model lacks (0: not there).
 #[derive(Debug, Clone, Copy, PartialEq)]
