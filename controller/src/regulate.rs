@@ -182,10 +182,12 @@ struct LagProbe {
     covered_s: f32,
     /// How much calmer than its defaults the loop runs for the lag (≥ 1).
     calm: f32,
-    /// The setpoint of the last period (`None` before the first: a loop's start is no step).
-    setpoint: Option<f32>,
+    /// The setpoint of the last period (NaN before the first: a loop's start is no step).
+    setpoint: f32,
     /// The setpoint step being learnt from, if any.
     lesson: Option<Lesson>,
+    /// The last setpoint step, in the controlled value's unit (signed; 0 before the first).
+    step: f32,
 }
 
 impl LagProbe {
@@ -201,8 +203,9 @@ impl LagProbe {
             lag_s: 0.0,
             covered_s,
             calm: 1.0,
-            setpoint: None,
+            setpoint: f32::NAN,
             lesson: None,
+            step: 0.0,
         }
     }
 
@@ -257,29 +260,43 @@ impl LagProbe {
     /// of 0.5..0.7). A lesson during which the observer's valve k2 moves more than
     /// [`LESSON_K2_FRACTION`], up to [`LESSON_PROBATION_PERIODS`] after the move (the
     /// observer needs that long to see a valve step the model does not), is undone: the sums
-    /// and the lag go back to what they were at the step.
-    fn learns(&mut self, setpoint: f32, load: Load<f32>, moving: bool) -> bool {
-        let stepped = self.setpoint.is_some_and(|before| before != setpoint);
-        self.setpoint = Some(setpoint);
-        if stepped {
+    /// and the lag go back to what they were at the step. So is a lesson whose reading, during
+    /// the move, gets ahead of the model by more than the whole step: no lag does that, a
+    /// valve moving the pressure the way the setpoint went does, at once (the observer sees it
+    /// ≈ 250 ms later; meanwhile the fit read the jump as up to 0.5 s of lag and the loop ran
+    /// at a quarter of its gain: docs/control.md, Limits).
+    fn learns(&mut self, setpoint: f32, load: Load<f32>, moving: bool, measured: f32) -> bool {
+        let step = setpoint - self.setpoint;
+        self.setpoint = setpoint;
+        // (Not a number on the first period: no step.)
+        if step.abs() > 0.0 {
             self.lesson = Some(Lesson {
                 k2: load.valve_k2,
                 sums: self.sums,
                 lag_s: self.lag_s,
                 probation: LESSON_PROBATION_PERIODS,
             });
+            self.step = step;
+            if moving {
+                // Nothing to undo yet: k2 is the step's, the reading where it was.
+                return true;
+            }
         }
         let Some(l) = self.lesson.as_mut() else {
             return false;
         };
         if (load.valve_k2 - l.k2).abs() > LESSON_K2_FRACTION * l.k2.abs() {
-            let (sums, lag_s) = (l.sums, l.lag_s);
-            self.sums = sums;
-            self.set_lag(lag_s);
-            self.lesson = None;
+            self.undo();
             return false;
         }
         if moving {
+            // A lag only holds the reading back: a reading ahead of the model by more than
+            // the whole step is a load's change the model does not see (a valve step during
+            // the move).
+            if (measured - self.m - self.step) * self.step > 0.0 {
+                self.undo();
+                return false;
+            }
             return true;
         }
         // The move is over: on probation, then kept.
@@ -288,6 +305,14 @@ impl LagProbe {
             self.lesson = None;
         }
         false
+    }
+
+    /// Undoes the lesson: the sums and the lag as they were at its step.
+    fn undo(&mut self) {
+        if let Some(l) = self.lesson.take() {
+            self.sums = l.sums;
+            self.set_lag(l.lag_s);
+        }
     }
 
     /// Sets the lag, and how much calmer than its defaults the loop runs for it: 1 up to
@@ -623,7 +648,7 @@ impl Regulator {
             // 120 ms, not 161: too close to P4's 81 to tell a water column from a slow drive).
             let y_ss = self.reference + gain * (self.last_pct - (ff - lead));
             // `learns` every period (it follows the setpoint), then the other conditions.
-            let lesson = self.probe.learns(setpoint, load, moving);
+            let lesson = self.probe.learns(setpoint, load, moving, measured);
             let fit = lesson && moving && !self.at_range_limit;
             self.probe.update(y_ss, tau, measured, period_s, fit);
         }
@@ -956,6 +981,48 @@ mod tests {
                 "a NaN model restarts"
             );
         }
+    }
+
+    /// A valve that closes during an upward move pushes the reading past where any lag could
+    /// leave it: the lesson is undone at once, before the observer has seen the valve (here it
+    /// never does). Without the rule the fit read the jump as a lag of 0.5 s, ran the loop
+    /// at a quarter of its gain, and kept it.
+    #[test]
+    fn a_reading_ahead_of_the_model_teaches_nothing() {
+        let p = BenchParams::<f32>::PAPER;
+        let mut bench = WhiteBox::new(p).unwrap();
+        let load = paper_load(&p);
+        let u0 = steady_torque(&p, load, Target::PressureMca(3.0))
+            .unwrap()
+            .torque_ref_pct;
+        let mut st = bench.steady_state(u0).unwrap();
+        let mut seen = bench.signals(&st).pressure_mca;
+        let s = ControlSettings::DEFAULT;
+        let mut reg = Regulator::new(Controlled::Pressure, seen, u0, st.speed_rpm);
+        let mut u = u0;
+        let mut taught = 0.0f32;
+        for k in 0..4000u32 {
+            let to = if k < 500 { 3.0 } else { 4.0 };
+            if k == 600 {
+                bench
+                    .set_load(p.valve_k2 * 1.3, p.static_head_c_mca)
+                    .unwrap();
+            }
+            if k % CONTROL_PERIOD_MS == 0 {
+                let o = reg.step(&p, load, &s, to, seen);
+                u = o.torque_pct;
+                taught = taught.max(o.lag_s);
+            }
+            bench.step(&mut st, u, 1e-3, Scheme::Rk4).unwrap();
+            lag_1ms(&mut seen, bench.signals(&st).pressure_mca, 0.02);
+        }
+        // A few periods are fitted before the reading is a step ahead: never enough to calm
+        // the loop (0.018 s; 0.50 s without the rule).
+        assert!(
+            taught < COVERED_LAG_PRESSURE_S,
+            "the loop ran on a lag of {taught} s"
+        );
+        assert_eq!(reg.last().lag_s, 0.0, "undone");
     }
 
     /// The probe through the loop, on the white-box bench whose pressure reading is delayed
