@@ -188,6 +188,9 @@ struct LagProbe {
     lesson: Option<Lesson>,
     /// The last setpoint step, in the controlled value's unit (signed; 0 before the first).
     step: f32,
+    /// The reading less the model's output at that step: where the reading stood, behind a
+    /// move still under way (a reversal) or off a model that drifted (a mode's switch).
+    ahead_from: f32,
 }
 
 impl LagProbe {
@@ -206,6 +209,7 @@ impl LagProbe {
             setpoint: f32::NAN,
             lesson: None,
             step: 0.0,
+            ahead_from: 0.0,
         }
     }
 
@@ -261,7 +265,10 @@ impl LagProbe {
     /// [`LESSON_K2_FRACTION`], up to [`LESSON_PROBATION_PERIODS`] after the move (the
     /// observer needs that long to see a valve step the model does not), is undone: the sums
     /// and the lag go back to what they were at the step. So is a lesson whose reading, during
-    /// the move, gets ahead of the model by more than the whole step: no lag does that, a
+    /// the move, gets ahead of the model by more than the whole step beyond where it stood at
+    /// the step (a review: measured from the model alone, a reversal during a move still
+    /// under way, or a model drifted off after a mode's switch, read as ahead on plants that
+    /// lag): no lag does that, a
     /// valve moving the pressure the way the setpoint went does, at once (the observer sees it
     /// ≈ 250 ms later; meanwhile the fit read the jump as up to 0.5 s of lag and the loop ran
     /// at a quarter of its gain: docs/control.md, Limits).
@@ -277,6 +284,7 @@ impl LagProbe {
                 probation: LESSON_PROBATION_PERIODS,
             });
             self.step = step;
+            self.ahead_from = measured - self.m;
             if moving {
                 // Nothing to undo yet: k2 is the step's, the reading where it was.
                 return true;
@@ -290,10 +298,10 @@ impl LagProbe {
             return false;
         }
         if moving {
-            // A lag only holds the reading back: a reading ahead of the model by more than
-            // the whole step is a load's change the model does not see (a valve step during
-            // the move).
-            if (measured - self.m - self.step) * self.step > 0.0 {
+            // A lag only holds the reading back: a reading gone ahead of the model by more
+            // than the whole step since the step is a load's change the model does not see
+            // (a valve step during the move).
+            if (measured - self.m - self.ahead_from - self.step) * self.step > 0.0 {
                 self.undo();
                 return false;
             }
@@ -1023,6 +1031,33 @@ mod tests {
             "the loop ran on a lag of {taught} s"
         );
         assert_eq!(reg.last().lag_s, 0.0, "undone");
+    }
+
+    /// A reversal during a move still under way (a review's case: 3 → 5 mca, then 4.5 while
+    /// the reading lags 1 mca behind the model) is no reading ahead: "ahead" counts from
+    /// where the reading stood at the step; a valve pushing the reading a whole step further
+    /// the new way is.
+    #[test]
+    fn a_reversal_during_a_move_is_no_reading_ahead() {
+        let load = paper_load(&BenchParams::<f32>::PAPER);
+        let mut probe = LagProbe::new(3.0, COVERED_LAG_PRESSURE_S);
+        assert!(!probe.learns(3.0, load, false, 3.0), "a start is no step");
+        assert!(probe.learns(5.0, load, true, 3.0));
+        // The model at 4.0, the reading behind it at 3.0, the setpoint reversed to 4.5.
+        probe.m = 4.0;
+        assert!(
+            probe.learns(4.5, load, true, 3.0),
+            "the reversal's lesson begins"
+        );
+        for _ in 0..10 {
+            assert!(
+                probe.learns(4.5, load, true, 3.0),
+                "the lag, not a valve: kept"
+            );
+        }
+        // The reading a whole step (0.5 mca) further down than it stood: a valve.
+        assert!(!probe.learns(4.5, load, true, 2.45), "undone");
+        assert!(probe.lesson.is_none());
     }
 
     /// The probe through the loop, on the white-box bench whose pressure reading is delayed
