@@ -997,40 +997,14 @@ mod tests {
     /// at a quarter of its gain, and kept it.
     #[test]
     fn a_reading_ahead_of_the_model_teaches_nothing() {
-        let p = BenchParams::<f32>::PAPER;
-        let mut bench = WhiteBox::new(p).unwrap();
-        let load = paper_load(&p);
-        let u0 = steady_torque(&p, load, Target::PressureMca(3.0))
-            .unwrap()
-            .torque_ref_pct;
-        let mut st = bench.steady_state(u0).unwrap();
-        let mut seen = bench.signals(&st).pressure_mca;
-        let s = ControlSettings::DEFAULT;
-        let mut reg = Regulator::new(Controlled::Pressure, seen, u0, st.speed_rpm);
-        let mut u = u0;
-        let mut taught = 0.0f32;
-        for k in 0..4000u32 {
-            let to = if k < 500 { 3.0 } else { 4.0 };
-            if k == 600 {
-                bench
-                    .set_load(p.valve_k2 * 1.3, p.static_head_c_mca)
-                    .unwrap();
-            }
-            if k % CONTROL_PERIOD_MS == 0 {
-                let o = reg.step(&p, load, &s, to, seen);
-                u = o.torque_pct;
-                taught = taught.max(o.lag_s);
-            }
-            bench.step(&mut st, u, 1e-3, Scheme::Rk4).unwrap();
-            lag_1ms(&mut seen, bench.signals(&st).pressure_mca, 0.02);
-        }
+        let (taught, last) = valve_during_move(3.0, 4.0, 600, None);
         // A few periods are fitted before the reading is a step ahead: never enough to calm
         // the loop (0.018 s; 0.50 s without the rule).
         assert!(
             taught < COVERED_LAG_PRESSURE_S,
             "the loop ran on a lag of {taught} s"
         );
-        assert_eq!(reg.last().lag_s, 0.0, "undone");
+        assert_eq!(last, 0.0, "undone");
     }
 
     /// A reversal during a move still under way (a review's case: 3 → 5 mca, then 4.5 while
@@ -1126,10 +1100,24 @@ mod tests {
     /// during which the observer's k2 moves past [`LESSON_K2_FRACTION`] is undone.
     #[test]
     fn a_valve_step_during_a_move_teaches_nothing() {
+        let (taught, last) = valve_during_move(2.0, 3.0, 700, Some(300));
+        assert_eq!(last, 0.0, "undone (it reached {taught} s meanwhile)");
+    }
+
+    /// The pressure loop on the white-box bench (a 20 ms transmitter), settled at `from`
+    /// mca, stepped to `to` at 0.5 s; the valve closes 30 % at `valve_ms` (the model never
+    /// knows); with `observer_ms`, the observer's k2 follows it over that long (as the
+    /// board's does), else never. The largest lag the loop ran on, and the last, s.
+    fn valve_during_move(
+        from: f32,
+        to: f32,
+        valve_ms: u32,
+        observer_ms: Option<u32>,
+    ) -> (f32, f32) {
         let p = BenchParams::<f32>::PAPER;
         let mut bench = WhiteBox::new(p).unwrap();
         let mut load = paper_load(&p);
-        let u0 = steady_torque(&p, load, Target::PressureMca(2.0))
+        let u0 = steady_torque(&p, load, Target::PressureMca(from))
             .unwrap()
             .torque_ref_pct;
         let mut st = bench.steady_state(u0).unwrap();
@@ -1139,29 +1127,24 @@ mod tests {
         let mut u = u0;
         let mut taught = 0.0f32;
         for k in 0..4000u32 {
-            let to = if k < 500 { 2.0 } else { 3.0 };
-            if k == 700 {
-                // The valve closes 30 % 200 ms into the move; the observer follows it over
-                // 300 ms (as the board's does), the model never knew.
-                let c = p.static_head_c_mca;
-                bench.set_load(p.valve_k2 * 1.3, c).unwrap();
+            let setpoint = if k < 500 { from } else { to };
+            if k == valve_ms {
+                bench
+                    .set_load(p.valve_k2 * 1.3, p.static_head_c_mca)
+                    .unwrap();
             }
-            if (700..1000).contains(&k) {
-                load.valve_k2 = p.valve_k2 * (1.0 + 0.3 * (k - 699) as f32 / 300.0);
+            if let Some(d) = observer_ms.filter(|&d| (valve_ms..valve_ms + d).contains(&k)) {
+                load.valve_k2 = p.valve_k2 * (1.0 + 0.3 * (k + 1 - valve_ms) as f32 / d as f32);
             }
             if k % CONTROL_PERIOD_MS == 0 {
-                let o = reg.step(&p, load, &s, to, seen);
+                let o = reg.step(&p, load, &s, setpoint, seen);
                 u = o.torque_pct;
                 taught = taught.max(o.lag_s);
             }
             bench.step(&mut st, u, 1e-3, Scheme::Rk4).unwrap();
             lag_1ms(&mut seen, bench.signals(&st).pressure_mca, 0.02);
         }
-        assert_eq!(
-            reg.last().lag_s,
-            0.0,
-            "undone (it reached {taught} s meanwhile)"
-        );
+        (taught, reg.last().lag_s)
     }
 
     /// A lag measured past what the defaults cover slows the model's gains (λ ×4 at twice
