@@ -187,6 +187,8 @@ struct LagProbe {
     /// The setpoint step being learnt from, if any.
     lesson: Option<Lesson>,
     /// The last setpoint step, in the controlled value's unit (signed; 0 before the first).
+    /// (It and `ahead_from` belong to the lesson, but kept here: in [`Lesson`] they cost the
+    /// step period's copy two more words and `regulator_step_max` a tick over its budget.)
     step: f32,
     /// The reading less the model's output at that step: where the reading stood, behind a
     /// move still under way (a reversal) or off a model that drifted (a mode's switch).
@@ -265,13 +267,13 @@ impl LagProbe {
     /// [`LESSON_K2_FRACTION`], up to [`LESSON_PROBATION_PERIODS`] after the move (the
     /// observer needs that long to see a valve step the model does not), is undone: the sums
     /// and the lag go back to what they were at the step. So is a lesson whose reading, during
-    /// the move, gets ahead of the model by more than the whole step beyond where it stood at
-    /// the step (a review: measured from the model alone, a reversal during a move still
-    /// under way, or a model drifted off after a mode's switch, read as ahead on plants that
-    /// lag): no lag does that, a
-    /// valve moving the pressure the way the setpoint went does, at once (the observer sees it
-    /// ≈ 250 ms later; meanwhile the fit read the jump as up to 0.5 s of lag and the loop ran
-    /// at a quarter of its gain: docs/control.md, Limits).
+    /// the move, gets further ahead of the model than it stood at the step by more than the
+    /// whole step: no lag does that, a valve moving the pressure the way the setpoint went
+    /// does, at once (the observer sees it ≈ 250 ms later; meanwhile the fit read the jump as
+    /// up to 0.5 s of lag and the loop ran at a quarter of its gain: docs/control.md,
+    /// Limits). "Ahead" counts from where the reading stood at the step, not from the model:
+    /// a reading still behind a move under way (a reversal) or off a model that drifted (a
+    /// mode's switch) read as ahead on plants that lag (a review).
     fn learns(&mut self, setpoint: f32, load: Load<f32>, moving: bool, measured: f32) -> bool {
         let step = setpoint - self.setpoint;
         self.setpoint = setpoint;
