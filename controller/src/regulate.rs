@@ -87,7 +87,8 @@ pub const ARRIVAL_PERIODS: u16 = 100;
 /// [`REGULATION_INTEGRAL_FACTOR`]. The feedforward makes the moves, so between them the
 /// feedback only takes back what the model does not see, a valve's step above all; λ, set for
 /// the moves on lagged plants, is calmer than that needs. At small errors the gains are the
-/// moves', so the loop's noise and its margins about the setpoint are unchanged. Chosen on
+/// moves', so the loop's noise and its margins about the setpoint are unchanged. Not once the
+/// loop has measured a lag beyond what the defaults cover (it runs calmed). Chosen on
 /// 800 random plants and the six of docs/control.md at three inertias (docs/control.md,
 /// Limits): 0.6..0.8 gave the same figures within 1 %; a fixed 0.7 (not rising with the
 /// error) passed the flow loop on the virtual flow meter 1.2 × the PI alone's noise.
@@ -720,8 +721,12 @@ impl Regulator {
         // no error to λ × [`REGULATION_LAMBDA_FRACTION`] (the integral time ×
         // [`REGULATION_INTEGRAL_FACTOR`]) at [`MOVING_FRACTION`] of the setpoint: a load's
         // change is the feedback's alone to take back (the feedforward makes the moves), and
-        // noise about the setpoint meets the gains as they are.
-        let gains = if plant.is_some() && !(self.heading.1 || self.moving || self.arriving > 0) {
+        // noise about the setpoint meets the gains as they are. Not on a plant measured
+        // lagging more than the defaults cover: it runs calmed.
+        let gains = if plant.is_some()
+            && self.calm() <= 1.0
+            && !(self.heading.1 || self.moving || self.arriving > 0)
+        {
             let x = Real::min(e.abs() / band, 1.0);
             PiGains {
                 kc: gains.kc * (1.0 + REGULATION_GAIN_RISE * x),
@@ -1493,7 +1498,8 @@ mod tests {
     /// Between moves the model law's gains rise with the error, from the moves' at a small
     /// error to λ × [`REGULATION_LAMBDA_FRACTION`] and the integral time ×
     /// [`REGULATION_INTEGRAL_FACTOR`] from [`MOVING_FRACTION`] of the setpoint; not during a
-    /// move, and never with the PI alone.
+    /// move, not on a plant measured lagging more than the defaults cover, and never with
+    /// the PI alone.
     #[test]
     fn the_feedback_tightens_with_the_error_between_moves() {
         let p = BenchParams::<f32>::PAPER;
@@ -1559,6 +1565,20 @@ mod tests {
                 "{law:?}: {a:?} {b:?} in a move"
             );
         }
+        // A plant measured lagging more than the defaults cover runs calmed: no rise.
+        s.law = ControlLaw::Model;
+        let mut reg = Regulator::new(Controlled::Pressure, 3.0, 56.0, 1300.0)
+            .with_lag(2.0 * COVERED_LAG_PRESSURE_S);
+        for _ in 0..400 {
+            reg.step(&p, load, &s, 3.0, 3.0);
+        }
+        let torque = |d: f32| {
+            let mut r = reg;
+            r.step(&p, load, &s, 3.0, 3.0 - d).torque_pct
+        };
+        let t0 = torque(0.0);
+        let (a, b) = ((torque(0.05 * band) - t0) / 0.05, torque(band) - t0);
+        assert!((b / a - 1.0).abs() < 0.005, "calmed: × {}", b / a);
     }
 
     /// With the model, the integral stands still while the reference is more than
