@@ -182,6 +182,19 @@ impl Controlled {
         (if asked >= 0.01 { asked } else { default }, default)
     }
 
+    /// The setpoint under which the model law's gains rise between moves as at this one
+    /// ([`REGULATION_LAMBDA_FRACTION`]), in the controlled value's unit: 2 mca, 10 l/s (the
+    /// middle of the ranges; 5 % of them is 33 and 25 × the transmitters' noise on
+    /// `pumpbench control`'s plant, 3 mm and 0.02 l/s). Scaled to 5 % of 0.5 mca, the gain
+    /// rose on the noise and on a lagged plant's ring (a review: 0.5 mca with 150 ms of lag
+    /// came back from a valve step in 4.64 s, 2.32 before the rise).
+    fn rise_floor(self) -> f32 {
+        match self {
+            Controlled::Pressure => 2.0,
+            Controlled::Flow => 10.0,
+        }
+    }
+
     /// The PI alone's gains: [`PI_PRESSURE`] or [`PI_FLOW`], their gain scaled as `1 / λ`.
     fn fixed_gains(self, s: &ControlSettings) -> PiGains {
         let g = match self {
@@ -663,14 +676,17 @@ impl Regulator {
         // With the model, a plant that lags more than the defaults cover is taken at least as
         // calmly as the lag measured asks of the defaults (settings calmer still stand); with
         // nothing measured beyond the defaults, the setting as it is, below the default too.
-        let lag_s = if plant.is_some() {
+        // (`within`: the lag the error assumes is no longer than the default, neither set
+        // nor measured longer: the gains may rise between moves.)
+        let (lag_s, within) = if plant.is_some() {
             let default = match self.controlled {
                 Controlled::Pressure => ControlSettings::DEFAULT.pressure_lag_s,
                 Controlled::Flow => ControlSettings::DEFAULT.flow_lag_s,
             };
-            self.calmed(lag_s, default)
+            let lag_s = self.calmed(lag_s, default);
+            (lag_s, lag_s <= default)
         } else {
-            lag_s
+            (lag_s, false)
         };
         self.seen_reference += (self.reference - self.seen_reference)
             * if lag_s > period_s {
@@ -721,13 +737,13 @@ impl Regulator {
         // no error to λ × [`REGULATION_LAMBDA_FRACTION`] (the integral time ×
         // [`REGULATION_INTEGRAL_FACTOR`]) at [`MOVING_FRACTION`] of the setpoint: a load's
         // change is the feedback's alone to take back (the feedforward makes the moves), and
-        // noise about the setpoint meets the gains as they are. Not on a plant measured
-        // lagging more than the defaults cover: it runs calmed.
-        let gains = if plant.is_some()
-            && self.calm() <= 1.0
-            && !(self.heading.1 || self.moving || self.arriving > 0)
-        {
-            let x = Real::min(e.abs() / band, 1.0);
+        // noise about the setpoint meets the gains as they are (the error scaled to 5 % of
+        // the setpoint, but of no less than `rise_floor`: at small setpoints noise and a
+        // ring would raise them). Not on a plant known to lag more than the defaults cover
+        // (measured, or the transmitter's lag set longer): it runs calmed.
+        let gains = if within && !(self.heading.1 || self.moving || self.arriving > 0) {
+            let scale = Real::max(band, MOVING_FRACTION * self.controlled.rise_floor());
+            let x = Real::min(e.abs() / scale, 1.0);
             PiGains {
                 kc: gains.kc * (1.0 + REGULATION_GAIN_RISE * x),
                 ti_s: gains.ti_s * (1.0 + (REGULATION_INTEGRAL_FACTOR - 1.0) * x),
