@@ -87,8 +87,9 @@ pub const ARRIVAL_PERIODS: u16 = 100;
 /// [`REGULATION_INTEGRAL_FACTOR`]. The feedforward makes the moves, so between them the
 /// feedback only takes back what the model does not see, a valve's step above all; λ, set for
 /// the moves on lagged plants, is calmer than that needs. At small errors the gains are the
-/// moves', so the loop's noise and its margins about the setpoint are unchanged. Not once the
-/// loop has measured a lag beyond what the defaults cover (it runs calmed). Chosen on
+/// moves', so the loop's noise and its margins about the setpoint are unchanged. Not on a
+/// plant known to lag more than the defaults cover (the lag measured, or registers 15, 16
+/// set longer than their defaults: it runs calmed). Chosen on
 /// 800 random plants and the six of docs/control.md at three inertias (docs/control.md,
 /// Limits): 0.6..0.8 gave the same figures within 1 %; a fixed 0.7 (not rising with the
 /// error) passed the flow loop on the virtual flow meter 1.2 × the PI alone's noise.
@@ -550,7 +551,7 @@ impl Regulator {
             1.0
         };
         // (The gains' rule written out, not derived from the plant's: derived, it cost 32 B
-        // of the QEMU image, which is at 98.8 % of its budget.)
+        // of the QEMU image, then at 98.8 % of its budget.)
         self.inertia = if factor >= INERTIA_USED_FROM && factor.is_finite() {
             factor
         } else {
