@@ -397,7 +397,8 @@ const LOOP_STEP_MS: u32 = 5000;
 
 /// The loop's period on the white-box bench: pressure steps 2 → 4 → 1 → 3 mca, the load as
 /// the observer gives it, a new estimate every 50 ms (k2 wandering ±1 %, so the feedforward's
-/// load change runs its second inverse every 10th period, as in the firmware).
+/// load change runs its second inverse every 10th period, as in the firmware), the speed the
+/// bench's.
 fn regulator_step(c: &mut Cost, n: u32) -> Result<(), Error> {
     use controller::regulate::{Controlled, Regulator, CONTROL_PERIOD_MS};
     use controller::types::ControlSettings;
@@ -427,6 +428,8 @@ fn regulator_step(c: &mut Cost, n: u32) -> Result<(), Error> {
             load.valve_k2 = p.valve_k2 * (1.0 + 0.02 * (unit - 0.5));
         }
         let y = bench.signals(&st).pressure_mca;
+        // The speed as the controller gives it every period (no speed limit here).
+        reg.set_speed_limit(0.0, st.speed_rpm);
         let o = c.time(|| {
             reg.step(
                 black_box(&p),
