@@ -1090,20 +1090,25 @@ mod tests {
     use model_core::inverse::{linearise, steady_torque};
     use model_core::{Scheme, WhiteBox};
 
-    /// The paper's bench on its own load, at rest at `pressure_mca`: its parameters, the
-    /// bench, the load, the torque that holds the pressure, the state and its pressure.
-    #[allow(clippy::type_complexity)]
-    fn bench_at(
-        pressure_mca: f32,
-    ) -> (
+    /// A bench at rest: its parameters, the bench, the load, the torque that holds the
+    /// pressure, the state and its pressure.
+    type AtRest = (
         BenchParams<f32>,
         WhiteBox<f32>,
         Load<f32>,
         f32,
         model_core::BenchState<f32>,
         f32,
-    ) {
-        let p = BenchParams::<f32>::PAPER;
+    );
+
+    /// The paper's bench on its own load, at rest at `pressure_mca`: its parameters, the
+    /// bench, the load, the torque that holds the pressure, the state and its pressure.
+    fn bench_at(pressure_mca: f32) -> AtRest {
+        bench_on(BenchParams::<f32>::PAPER, pressure_mca)
+    }
+
+    /// [`bench_at`] on the bench `p` (the paper's valve).
+    fn bench_on(p: BenchParams<f32>, pressure_mca: f32) -> AtRest {
         let bench = WhiteBox::new(p).unwrap();
         let load = paper_load(&p);
         let u0 = steady_torque(&p, load, Target::PressureMca(pressure_mca))
@@ -1423,14 +1428,7 @@ mod tests {
         valve_ms: u32,
         observer_ms: Option<u32>,
     ) -> (f32, f32) {
-        let p = BenchParams::<f32>::PAPER;
-        let mut bench = WhiteBox::new(p).unwrap();
-        let mut load = paper_load(&p);
-        let u0 = steady_torque(&p, load, Target::PressureMca(from))
-            .unwrap()
-            .torque_ref_pct;
-        let mut st = bench.steady_state(u0).unwrap();
-        let mut seen = bench.signals(&st).pressure_mca;
+        let (p, mut bench, mut load, u0, mut st, mut seen) = bench_at(from);
         let s = ControlSettings::DEFAULT;
         let mut reg = Regulator::new(Controlled::Pressure, seen, u0, st.speed_rpm);
         let mut u = u0;
@@ -1759,15 +1757,9 @@ mod tests {
     /// came down while the reading was still short of the setpoint (ms after the step; none:
     /// `None`).
     fn heavy_step(speed_known: bool) -> (f32, Option<u32>) {
-        let mut p = BenchParams::<f32>::PAPER;
-        p.inertia_kg_m2 *= 2.0;
-        let bench = WhiteBox::new(p).unwrap();
-        let load = paper_load(&p);
-        let u0 = steady_torque(&p, load, Target::PressureMca(1.0))
-            .unwrap()
-            .torque_ref_pct;
-        let mut st = bench.steady_state(u0).unwrap();
-        let mut seen = bench.signals(&st).pressure_mca;
+        let mut heavy = BenchParams::<f32>::PAPER;
+        heavy.inertia_kg_m2 *= 2.0;
+        let (p, bench, load, u0, mut st, mut seen) = bench_on(heavy, 1.0);
         let s = ControlSettings::DEFAULT;
         let mut reg = Regulator::new(Controlled::Pressure, seen, u0, st.speed_rpm);
         reg.set_inertia(2.0);
