@@ -917,25 +917,13 @@ impl Regulator {
         {
             return wanted;
         }
-        // Plain comparisons: every value here is finite (`wanted`'s parts are, the model's
-        // steady torque is, and the limits are). The range's limits apply after.
+        // One comparison each (`at_least`, `at_most`): every value here is finite (`wanted`'s
+        // parts are, the model's steady torque is). The range's limits apply after.
         let step = rate * (CONTROL_PERIOD_MS as f32 * 1e-3);
         if d > 0.0 {
-            let lo = self.last_pct - step;
-            let most = if lo > steady_pct { lo } else { steady_pct };
-            if wanted < most {
-                wanted
-            } else {
-                most
-            }
+            at_most(wanted, at_least(self.last_pct - step, steady_pct))
         } else {
-            let hi = self.last_pct + step;
-            let least = if hi < steady_pct { hi } else { steady_pct };
-            if wanted > least {
-                wanted
-            } else {
-                least
-            }
+            at_least(wanted, at_most(self.last_pct + step, steady_pct))
         }
     }
 
