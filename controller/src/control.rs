@@ -413,6 +413,9 @@ pub struct Commands {
     /// Writes of mode 0 (stop) so far (wraps): a change acknowledges the latched alarms
     /// and a trip.
     pub stop_writes: u16,
+    /// Writes of the manual setpoint so far (wraps): a change releases manual mode's hold of
+    /// the torque an automatic mode had (even a write of the value already there).
+    pub setpoint_writes: u8,
     /// The protections (holding registers 5..=7).
     pub protection: ProtectionConfig,
     /// The pressure and flow loops' settings (holding registers 8..=18).
@@ -546,8 +549,9 @@ pub struct Controller<const NP: usize, const HP: usize, const NF: usize, const H
     /// The loops' law at the last step.
     last_law: ControlLaw,
     /// Manual mode entered from a running automatic mode: the torque held then, and the
-    /// manual setpoint it holds against (a new setpoint ends the hold).
-    manual_hold: Option<(f32, f32)>,
+    /// count of manual setpoint writes then ([`Commands::setpoint_writes`]: a write, of any
+    /// value, ends the hold).
+    manual_hold: Option<(f32, u8)>,
     /// The mode acts in closed loop (the last step's): the next control ticks sample.
     regulating: bool,
     /// After a mode switch, the torque moves from the last applied one toward the new mode's
@@ -795,7 +799,7 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             self.transfer = self.last_mode.is_some();
             self.manual_hold = match (self.last_mode, mode) {
                 (Some(Mode::Profile | Mode::Pressure | Mode::Flow), Mode::Manual) => {
-                    Some((self.last_applied_pct, c.setpoint_pct))
+                    Some((self.last_applied_pct, c.setpoint_writes))
                 }
                 (_, Mode::Manual) => self.manual_hold,
                 _ => None,
@@ -832,9 +836,13 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             Mode::Manual => {
                 self.profile = None;
                 match self.manual_hold {
-                    Some((held, at)) if at == c.setpoint_pct => held,
-                    _ => {
-                        self.manual_hold = None;
+                    Some((held, at)) if at == c.setpoint_writes => held,
+                    hold => {
+                        // The hold's end is the switch it put off: at the switch rate.
+                        if hold.is_some() {
+                            self.manual_hold = None;
+                            self.transfer = true;
+                        }
                         c.setpoint_pct
                     }
                 }
@@ -872,14 +880,23 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             return wanted;
         }
         // After a switch or the link's return: from the torque the drive had, at the loop's
-        // rate or SWITCH_RATE_MIN_PCT_PER_S, the faster (a stop never takes minutes).
+        // rate or SWITCH_RATE_MIN_PCT_PER_S, the faster (a stop never takes minutes). In the
+        // loops a low limit above the torque the drive had is reached at that rate too, not
+        // in a step (a review: 0 → 50.6 % in one step into mode 3 with the low limit at 50 %,
+        // and on the link's return); the high limit applies at once (it protects the drive).
         let step = s.rate_pct_per_s.max(SWITCH_RATE_MIN_PCT_PER_S) * TICK_MS as f32 * 1e-3;
-        let moved = wanted.max(from - step).min(from + step);
-        if moved == wanted {
+        let regulates = mode.regulates();
+        let target = if regulates {
+            wanted.max(s.torque_min_pct)
+        } else {
+            wanted
+        };
+        let moved = target.max(from - step).min(from + step);
+        if moved == target {
             self.transfer = false;
         }
-        if mode.regulates() {
-            moved.max(s.torque_min_pct).min(s.torque_max_pct)
+        if regulates {
+            moved.min(s.torque_max_pct)
         } else {
             moved
         }
@@ -1164,7 +1181,9 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             pressure_fault: p_fault,
             flow_fault: q_fault,
             vfd_readings_invalid: blind,
-            tripped: self.protection.tripped(),
+            // Held at 0 % by a protection: tripped, or cleared and waiting for mode 0 (a
+            // review: a mode written before the trip cleared left the pump at 0 % with no bit).
+            tripped: self.hold,
             in_control: self.regulator.is_some() && link_ok && !self.control_held && !self.hold,
             limited: self.regulator.as_ref().is_some_and(|r| r.last().limited),
             virtual_measurement: self.virtual_measurement,

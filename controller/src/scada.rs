@@ -5,7 +5,7 @@
 //!
 //! | input register (FC 04) | meaning | unit |
 //! |---|---|---|
-//! | 0 | status bits: 0 running (commanded to run and not held at 0 % by a trip, or a torque still applied), 1 any alarm, 2 model extrapolating, 3 VFD link ok (the torque reference is delivered), 4 pressure transmitter fault, 5 flow transmitter fault, 6 VFD readings invalid (reads fail: registers 14-16 read 0), 7 tripped (the torque is held at 0 %: [`crate::protect`]), 8 saturated (a value in this map is beyond its register's range and reads as the range's end), 9 in control (mode 3 or 4 acting), 10 limited (the loop's torque at a limit or its rate), 11 virtual measurement (the loop acts on the observer's flow or pressure: its transmitter in fault), 12 control held (pressure lost and the observer's not trustworthy: the last torque held, any-alarm set), 13 the loop holds a flow (registers 26, 27 in 0.01 l/s) | |
+//! | 0 | status bits: 0 running (commanded to run and not held at 0 % by a trip, or a torque still applied), 1 any alarm, 2 model extrapolating, 3 VFD link ok (the torque reference is delivered), 4 pressure transmitter fault, 5 flow transmitter fault, 6 VFD readings invalid (reads fail: registers 14-16 read 0), 7 tripped (the torque is held at 0 % by a protection: tripped, or cleared and waiting for mode 0: [`crate::protect`]), 8 saturated (a value in this map is beyond its register's range and reads as the range's end), 9 in control (mode 3 or 4 acting), 10 limited (the loop's torque at a limit or its rate), 11 virtual measurement (the loop acts on the observer's flow or pressure: its transmitter in fault), 12 control held (pressure lost and the observer's not trustworthy: the last torque held, any-alarm set), 13 the loop holds a flow (registers 26, 27 in 0.01 l/s) | |
 //! | 1 | applied torque reference | 0.01 % |
 //! | 2 | measured pressure | 0.001 mca, signed |
 //! | 3 | measured flow | 0.01 l/s |
@@ -48,7 +48,7 @@
 //! | 7 | no-flow trip delay: how long the no-flow alarm stands before it trips, if bit 2 of 6 is set (default 30) | 1..=3600 s |
 //! | 8 | pressure setpoint of mode 3, 0.001 mca | 0..=65535 |
 //! | 9 | flow setpoint of mode 4, 0.01 l/s | 0..=65535 |
-//! | 10 | torque low limit of modes 3 and 4, 0.01 % (default 0) | 0..=10000, below 11 |
+//! | 10 | torque low limit of modes 3 and 4, 0.01 % (default 0); after a mode switch or the link's return reached at the switch rate, not in a step | 0..=10000, below 11 |
 //! | 11 | torque high limit of modes 3 and 4, 0.01 % (default 10000) | 0..=10000, above 10 |
 //! | 12 | torque rate limit of modes 3 and 4, 0.1 %/s (default 2000); a mode switch and the VFD link's return move at this rate or 50 %/s, the faster | 1..=65535 |
 //! | 13 | setpoint filter of modes 3 and 4 (the reference model's time constant), ms (default 200; 0: none) | 0..=10000 |
@@ -414,6 +414,9 @@ pub struct ScadaSlave {
     pub faults: u16,
     /// Writes of mode 0 (stop) so far (wraps): each acknowledges the latched alarms.
     pub stop_writes: u16,
+    /// Writes of the manual setpoint (holding register 0) so far (wraps): each releases
+    /// manual mode's hold of an automatic mode's torque, whatever its value.
+    pub setpoint_writes: u8,
     /// The protections (holding registers 5..=7).
     pub protection: ProtectionConfig,
     /// The loops' settings (holding registers 8..=18).
@@ -434,6 +437,7 @@ impl ScadaSlave {
             valve_permille: VALVE_NOMINAL_PERMILLE,
             faults: 0,
             stop_writes: 0,
+            setpoint_writes: 0,
             protection: ProtectionConfig::DEFAULT,
             control: ControlRegisters::DEFAULT,
         })
@@ -482,6 +486,7 @@ impl ScadaSlave {
             valve_factor: valve_factor(self.valve_permille),
             faults: injected_faults(self.faults),
             stop_writes: self.stop_writes,
+            setpoint_writes: self.setpoint_writes,
             protection: self.protection,
             control: self.control.settings(),
         }
@@ -528,7 +533,10 @@ impl ScadaSlave {
         let mut next = *self;
         for (k, &v) in values.iter().enumerate() {
             match start + k {
-                0 if v <= SETPOINT_MAX => next.setpoint = v,
+                0 if v <= SETPOINT_MAX => {
+                    next.setpoint = v;
+                    next.setpoint_writes = next.setpoint_writes.wrapping_add(1);
+                }
                 1 => {
                     next.mode = mode_from_register(v).ok_or(Exception::IllegalDataValue)?;
                     if next.mode == Mode::Stop {

@@ -182,7 +182,9 @@ pub struct Status {
     /// Bit 6: the drive's readings are invalid (its reads fail, or the link is down): the
     /// controller is blind to the drive, and its readings are published as 0.
     pub vfd_readings_invalid: bool,
-    /// Bit 7: tripped: a protection holds the torque at 0 % ([`crate::protect`]).
+    /// Bit 7: a protection holds the torque at 0 % ([`crate::protect`]): tripped (the causes in
+    /// input register 23), or, once the trip has cleared, until mode 0 is written (a restart
+    /// takes a mode written after the trip cleared; register 23 then reads 0).
     pub tripped: bool,
     /// Bit 9: a pressure or flow loop is in control (mode 3 or 4, running, the link up, a
     /// measurement to act on).

@@ -320,6 +320,72 @@ fn manual_from_pressure_control_holds_the_torque_until_a_setpoint_is_written() {
 }
 
 #[test]
+fn any_write_of_the_manual_setpoint_ends_manual_modes_hold() {
+    let mut b = holding_pressure(3.0);
+    let held = b.io.torque_ref_pct();
+    write_holding(&mut b, MODE, 1);
+    run(&mut b, 500);
+    assert_eq!(b.io.torque_ref_pct(), held, "held");
+    // Register 0 already holds 0 %: the operator asks for 0 % again, and gets it.
+    write_holding(&mut b, 0, 0);
+    let t = torques(&mut b, 1500);
+    assert_eq!(t[t.len() - 1], 0.0, "0 % after the write");
+    assert!(largest_step(held, &t) <= 0.2 + 1e-4, "at the switch rate");
+}
+
+#[test]
+fn a_low_limit_is_reached_at_the_switch_rate_on_a_switch_and_the_links_return() {
+    let mut b = setup(Mode::Stop, 0.0);
+    run(&mut b, 1000);
+    write_holding(&mut b, TORQUE_MIN, 5000);
+    write_holding(&mut b, PRESSURE_SP, 6000);
+    write_holding(&mut b, MODE, 3);
+    let t = torques(&mut b, 3000);
+    assert!(
+        largest_step(0.0, &t) <= 0.2 + 1e-4,
+        "from stop into mode 3 with the low limit at 50 %: a step of {}",
+        largest_step(0.0, &t)
+    );
+    assert!(t[500..].iter().all(|&u| u >= 50.0 - 1e-4), "then within it");
+    write_holding(&mut b, FAULTS, 1 << 3);
+    run(&mut b, 1500);
+    assert!(!status(&mut b).vfd_link_ok, "the link alarm");
+    assert_eq!(b.io.torque_ref_pct(), 0.0, "0 % while the link is down");
+    write_holding(&mut b, FAULTS, 0);
+    let t = torques(&mut b, 3000);
+    assert!(
+        largest_step(0.0, &t) <= 0.2 + 1e-4,
+        "the link's return: a step of {}",
+        largest_step(0.0, &t)
+    );
+    assert!(t[2500..].iter().all(|&u| u >= 50.0 - 1e-4));
+}
+
+#[test]
+fn bit_7_stays_set_while_a_cleared_trip_still_holds_0_pct() {
+    let mut b = holding_pressure(3.0);
+    write_holding(&mut b, FAULTS, 1); // dry run: the trip
+    run(&mut b, 3000);
+    assert!(status(&mut b).tripped);
+    // Acknowledged while the cause stands (kept), and mode 3 written before the trip
+    // clears: no restart, the torque held at 0 % until mode 0 is seen.
+    write_holding(&mut b, MODE, 0);
+    write_holding(&mut b, MODE, 3);
+    write_holding(&mut b, FAULTS, 0);
+    run(&mut b, 5000);
+    assert_eq!(input(&mut b, 23), 0, "the trip has cleared");
+    assert_eq!(b.io.torque_ref_pct(), 0.0, "still held");
+    let s = status(&mut b);
+    assert!(s.tripped && !s.running && !s.in_control, "{s:?}");
+    write_holding(&mut b, MODE, 0);
+    run(&mut b, 10);
+    assert!(!status(&mut b).tripped, "released by mode 0");
+    write_holding(&mut b, MODE, 3);
+    run(&mut b, 1000);
+    assert!(b.io.torque_ref_pct() > 0.0, "restarted");
+}
+
+#[test]
 fn a_stop_takes_at_most_2_s_whatever_the_loop_rate_and_shows_running_meanwhile() {
     let mut b = holding_pressure(3.0);
     write_holding(&mut b, 12, 1); // 0.1 %/s for the loop

@@ -518,7 +518,9 @@ pub struct Trace {
     /// Steps whose torque or loop outputs were NaN or infinite.
     pub nan_steps: u64,
     /// Steps whose torque was outside 0..=100 % or, in modes 3 and 4, the limits of
-    /// holding registers 10 and 11.
+    /// holding registers 10 and 11 (under the low limit only while the torque is neither 0 %,
+    /// a stop's, a cut link's or a trip's, nor coming up to the limit after a switch or the
+    /// link's return, as the controller brings it at the switch rate).
     pub out_of_limits: u64,
     /// The largest torque change between two periods, the second with the link up and no
     /// trip (a cut link's or a trip's 0 % excepted, the way back included), %/s.
@@ -711,7 +713,11 @@ pub fn run(
             {
                 nan += 1;
             }
-            if !(o.torque_ref_pct >= lo && o.torque_ref_pct <= hi) {
+            let u = o.torque_ref_pct;
+            let rising = last
+                .map_or(last_torque, |l| Some(l.torque_ref_pct))
+                .is_some_and(|b| u > b);
+            if !(u <= hi && (u >= lo || u == 0.0 || rising)) {
                 outside += 1;
             }
             last = Some(*o);

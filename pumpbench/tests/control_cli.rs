@@ -437,6 +437,30 @@ fn a_setpoint_step_beyond_the_speed_cap_does_not_trip() {
     );
 }
 
+/// A torque low limit of 50 % (holding register 10): the VFD link cut gives 0 % below it and
+/// its return comes back at the rate limit, not in a step; neither counts as a torque outside
+/// the limits (a review: 2 000 periods outside and a 10 160 %/s step on the return).
+#[test]
+fn a_low_torque_limit_costs_no_step_on_the_links_return() {
+    let out = pumpbench(&[
+        "control",
+        "--scenario",
+        "link-cut",
+        "--set",
+        "10=5000",
+        "--targets",
+    ]);
+    let stdout = ok(&out, "control");
+    for law in ["model", "pi"] {
+        assert!(
+            stdout.contains(&format!(
+                "{law}: torque NaN steps 0, outside its limits 0, largest change into a period with the link up 200.0 %/s"
+            )),
+            "{law}: {stdout}"
+        );
+    }
+}
+
 /// The speed cap's review: where overspeed only warns (holding register 6 without bit 1) there
 /// is no trip to keep out of and no cap (it held the pressure 10.6 % low); a light rotor with a
 /// water column whose reference the cap had cut, just after the VFD link's return, tripped
