@@ -796,7 +796,8 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             // bumplessly, the torque moves at the switch rate (a trip's 0 % excepted, below).
             // Into manual from a running automatic mode, the torque stays where it was until
             // the manual setpoint is written (register 0 does not follow the automatic modes).
-            self.transfer = self.last_mode.is_some();
+            // (A loop's first step too: from the drive's 0 %, up to a low limit at the rate.)
+            self.transfer = self.last_mode.is_some() || mode.regulates();
             self.manual_hold = match (self.last_mode, mode) {
                 (Some(Mode::Profile | Mode::Pressure | Mode::Flow), Mode::Manual) => {
                     Some((self.last_applied_pct, c.setpoint_writes))

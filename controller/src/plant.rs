@@ -1060,6 +1060,36 @@ mod tests {
         assert_eq!(feed(&mut s, &mut c, sent.as_bytes()), expected);
     }
 
+    /// A review's session: the low limit at 50 % written before the loop's first frame, then
+    /// the link cut and back. The torque comes up from 0 % at the rate (1 % a frame), on the
+    /// loop's first frame and on the link's return (both were 50 % steps).
+    #[test]
+    fn a_low_limit_is_reached_at_the_rate_from_the_first_frame() {
+        let (mut c, mut s) = (controller(), session());
+        let mut input = String::from("H 1\nW 10 5000\nW 8 3000\nW 1 3\n");
+        for k in 0..120 {
+            input.push_str(if (60..70).contains(&k) {
+                "S 745 745 -\n"
+            } else {
+                "S 745 745 0 0\n"
+            });
+        }
+        let out = feed(&mut s, &mut c, input.as_bytes());
+        let mut last = 0.0f32;
+        for (k, line) in out.lines().skip(4).enumerate() {
+            let Ok(Reply::Torque { reply: r, .. }) = Reply::parse(line.as_bytes()) else {
+                panic!("frame {k}: {line}");
+            };
+            assert!(
+                r.torque_ref_pct - last <= 1.0 + 1e-4,
+                "frame {k}: {last} -> {}",
+                r.torque_ref_pct
+            );
+            last = r.torque_ref_pct;
+        }
+        assert!(last >= 50.0, "within the limit at the end: {last}");
+    }
+
     /// The same bytes, the same replies: the run is the frames' alone.
     #[test]
     fn sessions_are_deterministic() {
