@@ -552,6 +552,9 @@ pub struct Controller<const NP: usize, const HP: usize, const NF: usize, const H
     /// count of manual setpoint writes then ([`Commands::setpoint_writes`]: a write, of any
     /// value, ends the hold).
     manual_hold: Option<(f32, u8)>,
+    /// [`Commands::setpoint_writes`] as the last step saw it: a write that came with the
+    /// switch into manual (the same frame, one multi-register write) ends the hold at once.
+    setpoint_writes_seen: u8,
     /// The mode acts in closed loop (the last step's): the next control ticks sample.
     regulating: bool,
     /// After a mode switch, the torque moves from the last applied one toward the new mode's
@@ -646,6 +649,7 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             last_mode: None,
             last_law: ControlLaw::Model,
             manual_hold: None,
+            setpoint_writes_seen: 0,
             regulating: false,
             transfer: false,
             last_applied_pct: 0.0,
@@ -800,7 +804,7 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             self.transfer = self.last_mode.is_some() || mode.regulates();
             self.manual_hold = match (self.last_mode, mode) {
                 (Some(Mode::Profile | Mode::Pressure | Mode::Flow), Mode::Manual) => {
-                    Some((self.last_applied_pct, c.setpoint_writes))
+                    Some((self.last_applied_pct, self.setpoint_writes_seen))
                 }
                 (_, Mode::Manual) => self.manual_hold,
                 _ => None,
@@ -829,6 +833,7 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             self.resume = true;
             self.transfer = true;
         }
+        self.setpoint_writes_seen = c.setpoint_writes;
         let wanted = match mode {
             Mode::Stop => {
                 self.profile = None;
@@ -867,26 +872,24 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
         }
         let s = &c.control;
         let from = self.last_applied_pct;
-        if mode.regulates() && !self.transfer {
-            // The loop's torque changes once a period; the output moves toward it at the rate
-            // limit every ms (a ramp, not a 1 % step every 5 ms), within the limits at once.
-            let step = s.rate_pct_per_s * TICK_MS as f32 * 1e-3;
-            return wanted
-                .max(from - step)
-                .min(from + step)
-                .max(s.torque_min_pct)
-                .min(s.torque_max_pct);
-        }
-        if !self.transfer {
+        let regulates = mode.regulates();
+        if !(regulates || self.transfer) {
             return wanted;
         }
-        // After a switch or the link's return: from the torque the drive had, at the loop's
-        // rate or SWITCH_RATE_MIN_PCT_PER_S, the faster (a stop never takes minutes). In the
-        // loops a low limit above the torque the drive had is reached at that rate too, not
-        // in a step (a review: 0 → 50.6 % in one step into mode 3 with the low limit at 50 %,
-        // and on the link's return); the high limit applies at once (it protects the drive).
-        let step = s.rate_pct_per_s.max(SWITCH_RATE_MIN_PCT_PER_S) * TICK_MS as f32 * 1e-3;
-        let regulates = mode.regulates();
+        // The loop's torque changes once a period; the output moves toward it at the rate
+        // limit every ms (a ramp, not a 1 % step every 5 ms). After a switch or the link's
+        // return: from the torque the drive had, at the loop's rate or
+        // SWITCH_RATE_MIN_PCT_PER_S, the faster (a stop never takes minutes). In the loops a
+        // low limit above the torque is reached at that rate too, not in a step (a review:
+        // 0 → 50.6 % in one step into mode 3 with the low limit at 50 %, on the link's return,
+        // and 20 → 90 % when it was written under a running loop); the high limit applies at
+        // once (it protects the drive).
+        let rate = if self.transfer {
+            s.rate_pct_per_s.max(SWITCH_RATE_MIN_PCT_PER_S)
+        } else {
+            s.rate_pct_per_s
+        };
+        let step = rate * TICK_MS as f32 * 1e-3;
         let target = if regulates {
             wanted.max(s.torque_min_pct)
         } else {

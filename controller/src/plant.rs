@@ -63,7 +63,11 @@
 //! not use it; SCADA input register 16 reads 0).
 //!
 //! The plant starts the controller in mode 0 (stop), as the board starts; a `W 1 3` (mode 3,
-//! pressure control) with `W 8 3000` (its setpoint, 3.000 mca) closes a loop. An exchange
+//! pressure control) with `W 8 3000` (its setpoint, 3.000 mca) closes a loop. Writes before
+//! the first frame set the state the controller starts in: in manual (`W 1 1`, its torque in
+//! register 0) or the profile its first step applies that torque at once, so a plant that
+//! starts settled starts the controller there (`pumpbench control`'s settled start does);
+//! the loops start from 0 % at the rate. An exchange
 //! (`>` from the plant, `<` from the controller):
 //!
 //! ```text

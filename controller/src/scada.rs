@@ -48,7 +48,7 @@
 //! | 7 | no-flow trip delay: how long the no-flow alarm stands before it trips, if bit 2 of 6 is set (default 30) | 1..=3600 s |
 //! | 8 | pressure setpoint of mode 3, 0.001 mca | 0..=65535 |
 //! | 9 | flow setpoint of mode 4, 0.01 l/s | 0..=65535 |
-//! | 10 | torque low limit of modes 3 and 4, 0.01 % (default 0); after a mode switch or the link's return reached at the switch rate, not in a step | 0..=10000, below 11 |
+//! | 10 | torque low limit of modes 3 and 4, 0.01 % (default 0); above the torque, reached at the rate (12), not in a step | 0..=10000, below 11 |
 //! | 11 | torque high limit of modes 3 and 4, 0.01 % (default 10000) | 0..=10000, above 10 |
 //! | 12 | torque rate limit of modes 3 and 4, 0.1 %/s (default 2000); a mode switch and the VFD link's return move at this rate or 50 %/s, the faster | 1..=65535 |
 //! | 13 | setpoint filter of modes 3 and 4 (the reference model's time constant), ms (default 200; 0: none) | 0..=10000 |

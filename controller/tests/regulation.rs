@@ -334,6 +334,40 @@ fn any_write_of_the_manual_setpoint_ends_manual_modes_hold() {
 }
 
 #[test]
+fn a_manual_setpoint_written_with_the_switch_is_applied() {
+    for setpoint_first in [true, false] {
+        let mut b = holding_pressure(3.0);
+        let held = b.io.torque_ref_pct();
+        // Both writes land before the next step, as a multi-register write of 0..1 does.
+        if setpoint_first {
+            write_holding(&mut b, 0, 0);
+            write_holding(&mut b, MODE, 1);
+        } else {
+            write_holding(&mut b, MODE, 1);
+            write_holding(&mut b, 0, 0);
+        }
+        let t = torques(&mut b, 1500);
+        assert_eq!(t[t.len() - 1], 0.0, "setpoint first {setpoint_first}");
+        assert!(largest_step(held, &t) <= 0.2 + 1e-4, "at the switch rate");
+    }
+}
+
+#[test]
+fn a_low_limit_written_under_a_running_loop_is_reached_at_the_rate() {
+    let mut b = holding_pressure(3.0);
+    let before = b.io.torque_ref_pct();
+    assert!(before < 80.0, "{before}");
+    write_holding(&mut b, TORQUE_MIN, 9000);
+    let t = torques(&mut b, 1000);
+    assert!(
+        largest_step(before, &t) <= 0.2 + 1e-4,
+        "a step of {}",
+        largest_step(before, &t)
+    );
+    assert!(t[500..].iter().all(|&u| u >= 90.0 - 1e-4), "then within it");
+}
+
+#[test]
 fn a_low_limit_is_reached_at_the_switch_rate_on_a_switch_and_the_links_return() {
     let mut b = setup(Mode::Stop, 0.0);
     run(&mut b, 1000);

@@ -523,9 +523,12 @@ pub struct Trace {
     /// link's return, as the controller brings it at the switch rate).
     pub out_of_limits: u64,
     /// The largest torque change between two periods, the second with the link up and no
-    /// trip (a cut link's or a trip's 0 % excepted, the way back included), %/s.
+    /// trip (a cut link's or a trip's 0 % excepted, the way back included, and a drop onto
+    /// the high limit, which applies at once), %/s.
     pub max_rate_pct_per_s: f64,
-    /// The torque rate limit of holding register 12 (every mode switch and the loops), %/s.
+    /// The torque rate limit of holding register 12 (the loops), or the switch rate where it
+    /// is faster (a mode switch moves the torque at least at
+    /// [`controller::control::SWITCH_RATE_MIN_PCT_PER_S`]), %/s.
     pub rate_limit_pct_per_s: f64,
     /// The plant's lag beyond the model the pressure and flow loops measured by the run's
     /// end, s (`Controller::measured_lag_s`; 0 if none was measured: the PI alone never does).
@@ -668,7 +671,13 @@ pub fn run(
         nan_steps: 0,
         out_of_limits: 0,
         max_rate_pct_per_s: 0.0,
-        rate_limit_pct_per_s: f64::from(lock.scada().commands().control.rate_pct_per_s),
+        rate_limit_pct_per_s: f64::from(
+            lock.scada()
+                .commands()
+                .control
+                .rate_pct_per_s
+                .max(controller::control::SWITCH_RATE_MIN_PCT_PER_S),
+        ),
         measured_lag_s: [0.0; 2],
         inertia_factor: 1.0,
         tripped_s: 0.0,
@@ -729,9 +738,15 @@ pub fn run(
             message: "a period without a controller step".into(),
         })?;
         // The rate into every period with the link up and no trip (the drop to 0 % of a cut
-        // link or a trip is allowed; the way back up is not a step).
+        // link or a trip is allowed; the way back up is not a step), nor a drop onto the high
+        // limit (it applies at once: it protects the drive).
         let status = Status::from_bits(reply.status);
-        if let (Some(prev), true) = (last_torque, status.vfd_link_ok && !status.tripped) {
+        let onto_high_limit = last_torque.is_some_and(|prev| reply.torque_ref_pct < prev)
+            && reply.torque_ref_pct == settings.torque_max_pct;
+        if let (Some(prev), true) = (
+            last_torque,
+            status.vfd_link_ok && !status.tripped && !onto_high_limit,
+        ) {
             let rate = f64::from((reply.torque_ref_pct - prev).abs()) / (period as f64 * 1e-3);
             trace.max_rate_pct_per_s = trace.max_rate_pct_per_s.max(rate);
         }
