@@ -319,36 +319,37 @@ fn manual_from_pressure_control_holds_the_torque_until_a_setpoint_is_written() {
     assert_eq!(t[t.len() - 1], 30.0, "the new manual setpoint");
 }
 
+/// Manual entered from mode 3 holds the loop's torque until register 0 is written: a write of
+/// the value it already holds (0 %, the operator asking for 0 % again) ends the hold, after
+/// the switch or with it (before the same step, as a multi-register write of 0..1 lands), and
+/// the torque goes to it at the switch rate.
 #[test]
 fn any_write_of_the_manual_setpoint_ends_manual_modes_hold() {
-    let mut b = holding_pressure(3.0);
-    let held = b.io.torque_ref_pct();
-    write_holding(&mut b, MODE, 1);
-    run(&mut b, 500);
-    assert_eq!(b.io.torque_ref_pct(), held, "held");
-    // Register 0 already holds 0 %: the operator asks for 0 % again, and gets it.
-    write_holding(&mut b, 0, 0);
-    let t = torques(&mut b, 1500);
-    assert_eq!(t[t.len() - 1], 0.0, "0 % after the write");
-    assert!(largest_step(held, &t) <= 0.2 + 1e-4, "at the switch rate");
-}
-
-#[test]
-fn a_manual_setpoint_written_with_the_switch_is_applied() {
-    for setpoint_first in [true, false] {
+    for case in ["after", "setpoint first", "mode first"] {
         let mut b = holding_pressure(3.0);
         let held = b.io.torque_ref_pct();
-        // Both writes land before the next step, as a multi-register write of 0..1 does.
-        if setpoint_first {
-            write_holding(&mut b, 0, 0);
-            write_holding(&mut b, MODE, 1);
-        } else {
-            write_holding(&mut b, MODE, 1);
-            write_holding(&mut b, 0, 0);
+        match case {
+            "after" => {
+                write_holding(&mut b, MODE, 1);
+                run(&mut b, 500);
+                assert_eq!(b.io.torque_ref_pct(), held, "held");
+                write_holding(&mut b, 0, 0);
+            }
+            "setpoint first" => {
+                write_holding(&mut b, 0, 0);
+                write_holding(&mut b, MODE, 1);
+            }
+            _ => {
+                write_holding(&mut b, MODE, 1);
+                write_holding(&mut b, 0, 0);
+            }
         }
         let t = torques(&mut b, 1500);
-        assert_eq!(t[t.len() - 1], 0.0, "setpoint first {setpoint_first}");
-        assert!(largest_step(held, &t) <= 0.2 + 1e-4, "at the switch rate");
+        assert_eq!(t[t.len() - 1], 0.0, "{case}: 0 % after the write");
+        assert!(
+            largest_step(held, &t) <= 0.2 + 1e-4,
+            "{case}: at the switch rate"
+        );
     }
 }
 
