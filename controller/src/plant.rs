@@ -50,8 +50,8 @@
 //! range, ±3.4e38, which rounds to one), `version` (a version this side does not speak). A
 //! line with several errors answers one of them (the order is not part of the protocol). An
 //! `E` reply to an `S` line runs no step: the controller's time stands still. After `Q` the
-//! QEMU board exits: its `B` can be lost with the serial line when QEMU ends first (seen in
-//! about half of a review's sessions); a plant should take the line's end as the end too.
+//! QEMU board exits 250 ms after its `B` (the serial line closes with QEMU: a plant that
+//! reads the `B` later than that finds the line's end instead).
 //!
 //! The ADC codes: a 4-20 mA loop through the board's 150 Ω shunt into its 12-bit, 3.3 V ADC
 //! ([`crate::analog::LoopConfig::typical`]): `code = round(mA × 0.150 / 3.3 × 4095)` =
