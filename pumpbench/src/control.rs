@@ -523,8 +523,8 @@ pub struct Trace {
     /// link's return, as the controller brings it at the switch rate).
     pub out_of_limits: u64,
     /// The largest torque change between two periods, the second with the link up and no
-    /// trip (a cut link's or a trip's 0 % excepted, the way back included, and a drop onto
-    /// the high limit, which applies at once), %/s.
+    /// trip (a cut link's or a trip's 0 % excepted, the way back included), counted from the
+    /// high limit where the torque before was above it (the drop onto it applies at once), %/s.
     pub max_rate_pct_per_s: f64,
     /// The torque rate limit of holding register 12 (the loops), or the switch rate where it
     /// is faster (a mode switch moves the torque at least at
@@ -738,16 +738,17 @@ pub fn run(
             message: "a period without a controller step".into(),
         })?;
         // The rate into every period with the link up and no trip (the drop to 0 % of a cut
-        // link or a trip is allowed; the way back up is not a step), nor a drop onto the high
-        // limit (it applies at once: it protects the drive).
+        // link or a trip is allowed; the way back up is not a step), counted from the high
+        // limit where the last torque was above it (the drop onto it applies at once: it
+        // protects the drive; the loop may go on down from it in the same period).
         let status = Status::from_bits(reply.status);
-        let onto_high_limit = last_torque.is_some_and(|prev| reply.torque_ref_pct < prev)
-            && reply.torque_ref_pct == settings.torque_max_pct;
-        if let (Some(prev), true) = (
-            last_torque,
-            status.vfd_link_ok && !status.tripped && !onto_high_limit,
-        ) {
-            let rate = f64::from((reply.torque_ref_pct - prev).abs()) / (period as f64 * 1e-3);
+        if let (Some(prev), true) = (last_torque, status.vfd_link_ok && !status.tripped) {
+            let from = if matches!(mode, 3 | 4) && prev > settings.torque_max_pct {
+                settings.torque_max_pct
+            } else {
+                prev
+            };
+            let rate = f64::from((reply.torque_ref_pct - from).abs()) / (period as f64 * 1e-3);
             trace.max_rate_pct_per_s = trace.max_rate_pct_per_s.max(rate);
         }
         if status.tripped {
