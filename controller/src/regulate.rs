@@ -526,11 +526,22 @@ impl Regulator {
                     Controlled::Flow => COVERED_LAG_FLOW_S,
                 },
             ),
+            // Until the first period's steady state: the plant as it stands (the speed now,
+            // the value read, the torque applied). The cap's model rule reads it before the
+            // first period's inverse: with 0 mca there, a loop closed within 2 % under the
+            // cap, or over it, took its reference to 0 and the pump tripped on the way back
+            // (a hostile review's plant steady at 1 857 rpm, the cap at 1 848).
             near: SteadyInverse {
                 torque_ref_pct: torque_pct,
                 speed_rpm,
-                flow_lps: 0.0,
-                pressure_mca: 0.0,
+                flow_lps: match controlled {
+                    Controlled::Flow => measured,
+                    Controlled::Pressure => 0.0,
+                },
+                pressure_mca: match controlled {
+                    Controlled::Pressure => measured,
+                    Controlled::Flow => 0.0,
+                },
                 limited: false,
             },
             last: RegulatorOutput {
@@ -1935,6 +1946,54 @@ mod tests {
                     }
                     None => assert!((end - 4.0).abs() < 0.01 && most > 1400.0, "{end} {most}"),
                 }
+            }
+        }
+    }
+
+    /// A loop closed on a plant steady just over the speed cap (the overspeed limit set so
+    /// that the cap is 0.5 % under the speed that holds 3 mca) starts where the plant stands:
+    /// its reference at the reading scaled to the cap, the torque with no dive, the speed
+    /// never over the limit; under either law, on pressure and on flow. (Before the fix the
+    /// model law's first period took the reference to 0 and the torque down at the rate.)
+    #[test]
+    fn a_loop_closed_just_over_the_cap_starts_where_the_plant_stands() {
+        for controlled in [Controlled::Pressure, Controlled::Flow] {
+            for law in [ControlLaw::Model, ControlLaw::Pi] {
+                let s = ControlSettings {
+                    law,
+                    ..ControlSettings::DEFAULT
+                };
+                let (p, bench, load, u0, mut st, _) = bench_at(3.0);
+                let read = |st: &model_core::BenchState<f32>| {
+                    let sig = bench.signals(st);
+                    match controlled {
+                        Controlled::Pressure => sig.pressure_mca,
+                        Controlled::Flow => sig.flow_lps,
+                    }
+                };
+                let (mut seen, w0) = (read(&st), st.speed_rpm);
+                let setpoint = seen;
+                let limit = 0.995 * w0 / SPEED_LIMIT_FRACTION;
+                let mut reg = Regulator::new(controlled, seen, u0, w0);
+                let (mut u, mut lowest, mut most) = (u0, u0, w0);
+                for k in 0..3000u32 {
+                    if k % CONTROL_PERIOD_MS == 0 {
+                        reg.set_speed_limit(limit, st.speed_rpm);
+                        u = reg.step(&p, load, &s, setpoint, seen).torque_pct;
+                        if k == 0 {
+                            let r = reg.last().reference;
+                            assert!(r > 0.95 * setpoint, "{controlled:?} {law:?}: {r}");
+                        }
+                    }
+                    bench.step(&mut st, u, 1e-3, Scheme::Rk4).unwrap();
+                    lag_1ms(&mut seen, read(&st), 0.02);
+                    lowest = lowest.min(u);
+                    most = most.max(st.speed_rpm);
+                }
+                assert!(
+                    lowest > u0 - 10.0 && most < limit,
+                    "{controlled:?} {law:?}: {u0} → {lowest} %, {most} rpm (limit {limit})"
+                );
             }
         }
     }
