@@ -979,6 +979,7 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             0.0
         };
         r.set_speed_limit(limit, self.protect_speed_rpm);
+        r.guard_speed(self.whitebox.params(), s);
         let o = r.step(self.whitebox.params(), v.load, s, setpoint, measured);
         self.measured_lag_s[k] = o.lag_s;
         o.torque_pct

@@ -128,6 +128,20 @@ pub const LESSON_PROBATION_PERIODS: u8 = 100;
 /// the next period on and the speed read the period before.
 pub const BRAKE_DEAD_TIME_S: f32 = 2.0 * CONTROL_PERIOD_MS as f32 * 1e-3;
 
+/// With [`ControlLaw::Model`], the dead time the speed guard allows for, s
+/// ([`Regulator::guard_speed`]: near the speed cap the torque starts down in time for the
+/// rotor to stop by the cap): the drive's torque loop, which the loop does not know, and the
+/// reading's age. 50 ms: a drive's torque loop of 10..50 ms and a reading a period old;
+/// longer only holds the speed further under the cap while it climbs.
+pub const GUARD_DEAD_TIME_S: f32 = 0.05;
+
+/// The speed's rate under which the speed guard does not act, rpm/s: at it the rotor would
+/// pass the cap by 20 rpm at most (well inside the 4 % margin to the trip, 77 rpm at the
+/// default limit), and the averaged rate of a reading with 0.5 rpm of noise is ±81 rpm/s
+/// (1 σ): at steady speed just under the cap, without the floor, the guard acted on that
+/// noise (random plants at valve ×0.7: 31 comparisons with the PI alone lost of 20 000, 1 now).
+pub const GUARD_MIN_RATE_RPM_PER_S: f32 = 300.0;
+
 /// `v`, at least `floor`: `floor` too if `v` is NaN. For a `floor` that is a number (a
 /// limit): one comparison, where [`Real::max`] pays a second for a NaN `floor` (≈ 4
 /// instructions on the M4).
@@ -475,6 +489,11 @@ pub struct Regulator {
     heading: (f32, bool),
     /// The speed now (the drive's reading, else the observer's), rpm.
     speed_rpm: f32,
+    /// The speed's rate, rpm/s: its change over a period, averaged (the last period's half).
+    speed_rate: f32,
+    /// The speed guard's torque limit this period, % (infinite: none;
+    /// [`Regulator::guard_speed`]).
+    guard_pct: f32,
     /// Periods left in which the integral waits for the reading to arrive after a setpoint
     /// move ([`ARRIVAL_PERIODS`]).
     arriving: u16,
@@ -516,6 +535,8 @@ impl Regulator {
             // Unknown until [`Regulator::set_speed_limit`] gives it: neither the cap nor the
             // braking acts on it.
             speed_rpm: f32::NAN,
+            speed_rate: 0.0,
+            guard_pct: f32::INFINITY,
             arriving: 0,
             closest: 0.0,
             arrival_k2: 0.0,
@@ -605,13 +626,48 @@ impl Regulator {
     /// beyond what the pump gives under [`SPEED_LIMIT_FRACTION`] of the limit holds the pump
     /// there instead of tripping it (two rules: docs/control.md, The speed limit). A limit not
     /// a number or ≤ 0: no cap.
+    #[inline(never)]
     pub fn set_speed_limit(&mut self, overspeed_rpm: f32, speed_rpm: f32) {
+        let rate = (speed_rpm - self.speed_rpm) * (1.0 / (CONTROL_PERIOD_MS as f32 * 1e-3));
+        // (A speed not a number, now or the period before, leaves the rate as it was.)
+        if rate.is_finite() {
+            self.speed_rate += 0.5 * (rate - self.speed_rate);
+        }
         self.speed_rpm = speed_rpm;
         self.speed_cap_rpm = if overspeed_rpm > 0.0 {
             overspeed_rpm * SPEED_LIMIT_FRACTION
         } else {
             f32::INFINITY
         };
+    }
+
+    /// The speed guard, after [`Regulator::set_speed_limit`] and before the period's
+    /// [`Regulator::step`] on `bench` with `s`: with [`ControlLaw::Model`], over 90 % of the
+    /// speed cap, the highest torque (%) that lets the rotor, at the rate its speed climbed
+    /// over the last two periods, stop by the cap. The torque's excess over the torque that
+    /// holds the speed is that rate a over K (rpm/s per %, on the rotor measured); at the
+    /// rate limit R it goes in a / (K R), while the speed gains a² / (2 K R), plus a T over
+    /// the dead time T ([`GUARD_DEAD_TIME_S`]). When these reach the gap to the cap the torque
+    /// starts down, at the rate, no further than the torque that holds the speed: a limit as
+    /// the range's (the integral held while it binds). Not under
+    /// [`GUARD_MIN_RATE_RPM_PER_S`]. On the drive's speed alone, no model of the pump: the
+    /// cap's two rules act on the model (late on a pump weaker than it) and on the reading
+    /// once the speed has passed the cap (late for a light rotor).
+    #[inline(never)]
+    pub fn guard_speed(&mut self, bench: &BenchParams<f32>, s: &ControlSettings) {
+        self.guard_pct = f32::INFINITY;
+        let g = self.speed_cap_rpm - self.speed_rpm;
+        if !(s.law == ControlLaw::Model && g < 0.1 * self.speed_cap_rpm) {
+            return;
+        }
+        let period_s = CONTROL_PERIOD_MS as f32 * 1e-3;
+        // Averaged: the reading's noise over one period would be ±140 rpm/s, ±81 averaged.
+        let a = self.speed_rate;
+        let k = bench.accel_rpm_per_s_per_pct() / self.plant_inertia;
+        let rate = s.rate_pct_per_s;
+        if a > GUARD_MIN_RATE_RPM_PER_S && a * (a / (2.0 * k * rate) + GUARD_DEAD_TIME_S) >= g {
+            self.guard_pct = at_least(self.last_pct - rate * period_s, self.last_pct - a / k);
+        }
     }
 
     /// The reference is on its way to a new setpoint (more than [`MOVING_FRACTION`] of it
@@ -822,7 +878,11 @@ impl Regulator {
         }
         let step = s.rate_pct_per_s * period_s;
         let lo = at_least(self.last_pct - step, s.torque_min_pct);
-        let hi = at_most(self.last_pct + step, s.torque_max_pct);
+        // (The speed guard's limit, [`Regulator::guard_speed`], is one more high limit.)
+        let hi = at_most(
+            at_most(self.last_pct + step, s.torque_max_pct),
+            self.guard_pct,
+        );
         // `wanted` is finite (its parts are); max/min rather than clamp: no panic path on the
         // MCU, and lo > hi (limits moved under the torque) resolves to the range's side.
         // (By comparisons: `f32`'s max/min are calls of `fmaxf` and `fminf` on the M4, ≈ 15
@@ -1996,6 +2056,48 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// The speed guard: a pump weaker than the model (head × 0.7: 4 mca needs 1 665 rpm, the
+    /// model says less) on a rotor of 0.3 × the paper's inertia behind a 150 ms transmitter,
+    /// the overspeed limit at 1 650 rpm (the cap 1 584): the model's rule does not see the cap
+    /// coming, the reading's acts once the speed is over it. On a 2 → 4 mca step the model
+    /// law's rotor passed the cap by 55 rpm without the guard (1 640 rpm, 10 from the trip);
+    /// with it by under 20 (the guard's floor allows ≈ 20), and it settles at the cap
+    /// ([`Regulator::guard_speed`]).
+    #[test]
+    fn the_speed_guard_stops_a_fast_rotor_by_the_cap() {
+        let model = BenchParams::<f32>::PAPER;
+        let mut truth = model;
+        truth.alpha.iter_mut().for_each(|a| *a *= 0.7);
+        truth.inertia_kg_m2 *= 0.3;
+        let plant = WhiteBox::new(truth).unwrap();
+        let load = paper_load(&model);
+        let u0 = steady_torque(&truth, load, Target::PressureMca(2.0))
+            .unwrap()
+            .torque_ref_pct;
+        let limit = 1650.0f32;
+        let cap = limit * SPEED_LIMIT_FRACTION;
+        let s = ControlSettings::DEFAULT;
+        let mut st = plant.steady_state(u0).unwrap();
+        let mut seen = plant.signals(&st).pressure_mca;
+        let mut reg = Regulator::new(Controlled::Pressure, seen, u0, st.speed_rpm);
+        let (mut u, mut most) = (u0, 0.0f32);
+        for k in 0..4000u32 {
+            if k % CONTROL_PERIOD_MS == 0 {
+                reg.set_speed_limit(limit, st.speed_rpm);
+                reg.guard_speed(&model, &s);
+                u = reg.step(&model, load, &s, 4.0, seen).torque_pct;
+            }
+            plant.step(&mut st, u, 1e-3, Scheme::Rk4).unwrap();
+            lag_1ms(&mut seen, plant.signals(&st).pressure_mca, 0.15);
+            most = most.max(st.speed_rpm);
+        }
+        let w = st.speed_rpm;
+        assert!(
+            most < cap + 20.0 && (w - cap).abs() < 20.0,
+            "{most} {w} (cap {cap})"
+        );
     }
 
     /// The climb back from the reading after a hold (the VFD link's return) is a move even if
