@@ -2106,7 +2106,7 @@ mod tests {
             let (mut u, mut most, mut read) = (u0, 0.0f32, st.speed_rpm);
             for k in 0..4000u32 {
                 if k % CONTROL_PERIOD_MS == 0 {
-                    if (k / CONTROL_PERIOD_MS) % every == 0 {
+                    if (k / CONTROL_PERIOD_MS).is_multiple_of(every) {
                         read = st.speed_rpm;
                     }
                     reg.set_speed_limit(limit, read);
