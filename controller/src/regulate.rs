@@ -655,6 +655,13 @@ impl Regulator {
         };
     }
 
+    /// The rotor's acceleration per % of torque, rpm/s per %: `bench`'s on the rotor measured
+    /// (the braking's and the speed guard's K).
+    #[inline(always)]
+    fn rotor_accel(&self, bench: &BenchParams<f32>) -> f32 {
+        bench.accel_rpm_per_s_per_pct() / self.plant_inertia
+    }
+
     /// The speed guard, after [`Regulator::set_speed_limit`] and before the period's
     /// [`Regulator::step`] on `bench` with `s`: with [`ControlLaw::Model`], over 90 % of the
     /// speed cap, the highest torque (%) that lets the rotor, at the rate its speed climbs
@@ -681,7 +688,7 @@ impl Regulator {
         // Averaged: the reading's noise (0.5 rpm) over one period would be ±140 rpm/s, ±13
         // averaged.
         let a = self.speed_rate;
-        let k = bench.accel_rpm_per_s_per_pct() / self.plant_inertia;
+        let k = self.rotor_accel(bench);
         let rate = s.rate_pct_per_s;
         if a > GUARD_MIN_RATE_RPM_PER_S && a * (a / (2.0 * k * rate) + GUARD_DEAD_TIME_S) >= g {
             self.guard_pct = at_least(self.last_pct - rate * period_s, self.last_pct - a / k);
@@ -995,7 +1002,7 @@ impl Regulator {
         // The static feedforward (the model's inverse at the reference: with `plant` known,
         // this period's).
         let steady_pct = self.near.torque_ref_pct;
-        let k = bench.accel_rpm_per_s_per_pct() / self.plant_inertia;
+        let k = self.rotor_accel(bench);
         let d = self.last_pct - steady_pct;
         let g = self.near.speed_rpm - self.speed_rpm;
         let (d_abs, g_abs) = (d.abs(), g.abs());
