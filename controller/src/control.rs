@@ -709,7 +709,7 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
     }
 
     /// The plant's lag beyond the model the pressure and flow loops measured last, s
-    /// (`RegulatorOutput::lag_s`; 0 until a setpoint step of the model-based law showed one).
+    /// (`Regulator::lag_s`; 0 until a setpoint step of the model-based law showed one).
     pub fn measured_lag_s(&self) -> [f32; 2] {
         self.measured_lag_s
     }
@@ -981,7 +981,8 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
         r.set_speed_limit(limit, self.protect_speed_rpm);
         r.guard_speed(self.whitebox.params(), s);
         let o = r.step(self.whitebox.params(), v.load, s, setpoint, measured);
-        self.measured_lag_s[k] = o.lag_s;
+        r.watch_ring(s);
+        self.measured_lag_s[k] = r.lag_s();
         o.torque_pct
     }
 
@@ -1048,6 +1049,10 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
     }
 
     /// One millisecond (see the module docs).
+    // Inlined always: each board calls it once, from its control task. Left to LLVM, a
+    // 4-byte change elsewhere in the controller made it keep this out of line and split the
+    // task: the QEMU image grew 1.5 KB past its 64 KiB (`cargo xtask bench`).
+    #[inline(always)]
     pub fn step(&mut self, inp: &Inputs) -> Outputs {
         let now = self.t_ms;
         let adapt = inp.commands.narmax_adapt;

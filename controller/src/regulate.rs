@@ -22,7 +22,7 @@
 //!   constant ([`ControlSettings::pressure_lag_s`], [`ControlSettings::flow_lag_s`]) minus the
 //!   reading;
 //! - with the model, the loop measures the plant's lag beyond the model on its setpoint steps
-//!   ([`RegulatorOutput::lag_s`]) and runs calmer when it exceeds what the settings cover
+//!   ([`Regulator::lag_s`]) and runs calmer when it exceeds what the settings cover
 //!   ([`COVERED_LAG_PRESSURE_S`], [`COVERED_LAG_FLOW_S`]): λ and the assumed lag at least
 //!   their defaults multiplied by the square of the ratio (at most [`CALM_MAX`]), or the
 //!   settings where those are calmer still;
@@ -103,7 +103,7 @@ pub const REGULATION_INTEGRAL_FACTOR: f32 = 1.1;
 /// The gain's rise at full error ([`REGULATION_LAMBDA_FRACTION`]), as a fraction.
 const REGULATION_GAIN_RISE: f32 = 1.0 / REGULATION_LAMBDA_FRACTION - 1.0;
 
-/// The lag beyond the model ([`RegulatorOutput::lag_s`]) the default settings cover on the
+/// The lag beyond the model ([`Regulator::lag_s`]) the default settings cover on the
 /// pressure loop, s: on `pumpbench control`'s plants with drives and transmitters lagging up
 /// to 110 ms together (docs/control.md, P0, P2, P3, P4) the probe measured 14..93 ms and the
 /// defaults held the targets; with water columns of 0.2 and 0.5 mca·s²/l, 115..161 ms, and
@@ -151,6 +151,27 @@ pub const GUARD_MIN_RATE_RPM_PER_S: f32 = 300.0;
 /// rate are within [`GUARD_DEAD_TIME_S`]'s margin. A hold's whole change seen in one period
 /// (the link's return) makes the rate wrong for ≈ 30 periods.
 pub const SPEED_RATE_WEIGHT: f32 = 0.125;
+
+/// The ring watch ([`Regulator::watch_ring`]): the band the error crosses, as a fraction of
+/// the setpoint (of 2 mca or 10 l/s at least: 40 mm and 0.2 l/s, 13 and 10 × the noise of
+/// `pumpbench control`'s transmitters): the 2 % the settling figures count.
+pub const RING_BAND_FRACTION: f32 = 0.02;
+/// The ring watch's smoothing of the error, per control period (≈ 25 ms; 17° of phase at
+/// 2 Hz): a flow meter's noise of 0.1 l/s (1 σ, a review's plant) falls to ≈ 0.03 l/s, far
+/// inside the band.
+pub const RING_SMOOTHING: f32 = 0.2;
+/// Crossings in a row that make a ring (three periods of it). At 4 (two) the watch also
+/// calmed valve steps that rang twice and died out: on 600 random plants (docs/control.md,
+/// Limits) 16 comparisons with the PI alone lost; at 6 and 8, on 400 of them, none; 6 ended
+/// a review's ring (±17 % at 1 mca) sooner than 8 (settled in 2.9 s against 3.4, a first
+/// version of the watch).
+pub const RING_CROSSINGS: u8 = 6;
+/// The longest half-period of a ring, control periods (1 s).
+pub const RING_GAP_PERIODS: u16 = 200;
+/// The lag the loop takes, × per ring: from what the defaults cover, λ and the lag the error
+/// assumes × 1.56 and the gains' rise between moves off (the loop's gain ÷ 2.2 at most);
+/// each further ring × 1.56 again, up to [`CALM_MAX`].
+pub const RING_LAG_FACTOR: f32 = 1.25;
 
 /// `v`, at least `floor`: `floor` too if `v` is NaN. For a `floor` that is a number (a
 /// limit): one comparison, where [`Real::max`] pays a second for a NaN `floor` (≈ 4
@@ -280,6 +301,9 @@ struct LagProbe {
     covered_s: f32,
     /// How much calmer than its defaults the loop runs for the lag (≥ 1).
     calm: f32,
+    /// The least lag the loop takes, s: raised each time the loop rings
+    /// ([`Regulator::watch_ring`]); 0 until then.
+    floor_s: f32,
     /// The setpoint of the last period (NaN before the first: a loop's start is no step).
     setpoint: f32,
     /// The setpoint step being learnt from, if any.
@@ -306,6 +330,7 @@ impl LagProbe {
             lag_s: 0.0,
             covered_s,
             calm: 1.0,
+            floor_s: 0.0,
             setpoint: f32::NAN,
             lesson: None,
             step: 0.0,
@@ -353,7 +378,8 @@ impl LagProbe {
         let cov = *sed - *se * *sd / *n;
         // Enough motion to say: the model's rate spread over ≥ 1 unit/s on average.
         if var > *n && var.is_finite() && cov.is_finite() {
-            self.set_lag((-cov / var).clamp(0.0, Self::MAX_S));
+            // (No lower than a ring showed: `floor_s`.)
+            self.set_lag(at_least((-cov / var).clamp(0.0, Self::MAX_S), self.floor_s));
         }
     }
 
@@ -460,9 +486,6 @@ pub struct RegulatorOutput {
     pub integral_pct: f32,
     /// The torque was held at a limit (range or rate).
     pub limited: bool,
-    /// The plant's lag beyond the model, measured on the setpoint steps (model-based law), s;
-    /// 0 until a step has shown one.
-    pub lag_s: f32,
 }
 
 /// A loop's state.
@@ -505,6 +528,12 @@ pub struct Regulator {
     /// The speed guard's torque limit this period, % (infinite: none;
     /// [`Regulator::guard_speed`]).
     guard_pct: f32,
+    /// The ring watch ([`Regulator::watch_ring`]): the error smoothed, the side of the band
+    /// it was last beyond (0: none), the crossings in a row, the periods since the last.
+    ring_e: f32,
+    ring_side: i8,
+    ring_count: u8,
+    ring_age: u16,
     /// Periods left in which the integral waits for the reading to arrive after a setpoint
     /// move ([`ARRIVAL_PERIODS`]).
     arriving: u16,
@@ -548,6 +577,10 @@ impl Regulator {
             speed_rpm: f32::NAN,
             speed_rate: 0.0,
             guard_pct: f32::INFINITY,
+            ring_e: 0.0,
+            ring_side: 0,
+            ring_count: 0,
+            ring_age: 0,
             arriving: 0,
             closest: 0.0,
             arrival_k2: 0.0,
@@ -583,13 +616,12 @@ impl Regulator {
                 feedforward_pct: 0.0,
                 integral_pct: 0.0,
                 limited: false,
-                lag_s: 0.0,
             },
         }
     }
 
     /// The loop starting with the plant's lag beyond the model measured by an earlier loop
-    /// on the same plant ([`RegulatorOutput::lag_s`], s; a negative or non-finite value is
+    /// on the same plant ([`Regulator::lag_s`], s; a negative or non-finite value is
     /// taken as 0, more than 1 s as 1 s).
     pub fn with_lag(mut self, lag_s: f32) -> Self {
         self.probe.set_lag(if lag_s.is_finite() {
@@ -597,7 +629,6 @@ impl Regulator {
         } else {
             0.0
         });
-        self.last.lag_s = self.probe.lag_s;
         self
     }
 
@@ -695,6 +726,68 @@ impl Regulator {
         }
     }
 
+    /// The ring watch, after each [`Regulator::step`], with [`ControlLaw::Model`]. Between
+    /// setpoint moves (and their lessons' probation), the torque off its range's limits and the
+    /// speed under 90 % of the cap (the cap's rules and the limits make swings of their own,
+    /// which a calmer feedback does not take away), the error is smoothed
+    /// ([`RING_SMOOTHING`]) and watched against a band of ±[`RING_BAND_FRACTION`] of the
+    /// setpoint (of 2 mca or 10 l/s at least). [`RING_CROSSINGS`] crossings in a row from
+    /// beyond one side to beyond the other, each within [`RING_GAP_PERIODS`] of the last, are
+    /// a ring: the loop's gain is too high for a plant that lags more than the model and the
+    /// lag measured on its steps say. The lag the loop takes ([`Regulator::lag_s`]) is then
+    /// raised to [`RING_LAG_FACTOR`] × what it was, at least × what the defaults cover, at
+    /// most 1 s: the loop runs calmer as for a lag measured that long (λ and the lag the
+    /// error assumes, no rise of the gains between moves), for the rest of its life and in
+    /// the loops after it (the lag is kept), and a later lesson does not take it lower. The
+    /// PI alone (law 1) is not watched: it is the drive's PI, as shipped.
+    #[inline(never)]
+    pub fn watch_ring(&mut self, s: &ControlSettings) {
+        if s.law != ControlLaw::Model {
+            return;
+        }
+        self.ring_e += (self.last.error - self.ring_e) * RING_SMOOTHING;
+        if self.heading.1
+            || self.arriving > 0
+            || self.probe.lesson.is_some()
+            || self.moving
+            || self.at_range_limit
+            || self.speed_rpm > 0.9 * self.speed_cap_rpm
+        {
+            self.ring_side = 0;
+            self.ring_count = 0;
+            return;
+        }
+        self.ring_age = self.ring_age.saturating_add(1);
+        let h = RING_BAND_FRACTION * at_least(self.heading.0.abs(), self.controlled.rise_floor());
+        let e = self.ring_e;
+        let side = if e > h {
+            1
+        } else if e < -h {
+            -1
+        } else {
+            return;
+        };
+        if side == self.ring_side {
+            return;
+        }
+        self.ring_count = if self.ring_side != 0 && self.ring_age <= RING_GAP_PERIODS {
+            self.ring_count + 1
+        } else {
+            0
+        };
+        self.ring_side = side;
+        self.ring_age = 0;
+        if self.ring_count >= RING_CROSSINGS {
+            self.ring_count = 0;
+            let p = &mut self.probe;
+            p.floor_s = at_most(
+                at_least(p.lag_s, p.covered_s) * RING_LAG_FACTOR,
+                LagProbe::MAX_S,
+            );
+            p.set_lag(p.floor_s);
+        }
+    }
+
     /// The reference is on its way to a new setpoint (more than [`MOVING_FRACTION`] of it
     /// away, at the last period): the loop, not the load, moves the plant.
     pub fn moving(&self) -> bool {
@@ -709,6 +802,13 @@ impl Regulator {
     /// The last period's output.
     pub fn last(&self) -> RegulatorOutput {
         self.last
+    }
+
+    /// The plant's lag beyond the model the loop takes, s: measured on its setpoint steps
+    /// (model-based law), at least what a ring showed ([`Regulator::watch_ring`]); 0 until
+    /// either. In 0..=1 s.
+    pub fn lag_s(&self) -> f32 {
+        self.probe.lag_s
     }
 
     /// A period without a measurement to act on (or with the torque not delivered): the last
@@ -939,7 +1039,6 @@ impl Regulator {
             feedforward_pct: ff,
             integral_pct: self.integral_pct,
             limited,
-            lag_s: self.probe.lag_s,
         };
         self.last
     }
@@ -1461,7 +1560,7 @@ mod tests {
                 line.push(bench.signals(&st).pressure_mca);
                 lag_1ms(&mut seen, line[0], 0.02);
             }
-            lags[i] = reg.last().lag_s;
+            lags[i] = reg.lag_s();
         }
         lags
     }
@@ -1530,12 +1629,12 @@ mod tests {
             if k % CONTROL_PERIOD_MS == 0 {
                 let o = reg.step(&p, load, &s, setpoint, seen);
                 u = o.torque_pct;
-                taught = taught.max(o.lag_s);
+                taught = taught.max(reg.lag_s());
             }
             bench.step(&mut st, u, 1e-3, Scheme::Rk4).unwrap();
             lag_1ms(&mut seen, bench.signals(&st).pressure_mca, 0.02);
         }
-        (taught, reg.last().lag_s)
+        (taught, reg.lag_s())
     }
 
     /// A lag measured past what the defaults cover slows the model's gains (λ ×4 at twice
@@ -1598,9 +1697,9 @@ mod tests {
         assert_eq!(r(Controlled::Flow, COVERED_LAG_FLOW_S).calm(), 1.0);
         assert_eq!(r(Controlled::Flow, 0.9).calm(), CALM_MAX);
         for bad in [f32::NAN, f32::NEG_INFINITY, -1.0] {
-            assert_eq!(r(Controlled::Pressure, bad).last().lag_s, 0.0);
+            assert_eq!(r(Controlled::Pressure, bad).lag_s(), 0.0);
         }
-        assert_eq!(r(Controlled::Pressure, 7.0).last().lag_s, LagProbe::MAX_S);
+        assert_eq!(r(Controlled::Pressure, 7.0).lag_s(), LagProbe::MAX_S);
     }
 
     /// After a setpoint move, the model law's integral waits for a reading still on its
@@ -2132,6 +2231,62 @@ mod tests {
         }
     }
 
+    /// The paper's bench holding `pressure_mca` behind a reading delayed `delay_ms` and
+    /// lagged 20 ms, no setpoint step to teach the loop the delay: the loop started 10 %
+    /// under the setpoint, 8 s. With `watch`, [`Regulator::watch_ring`] every period. The
+    /// reading's swing (max − min) over the last 2 s, mca, and the lag the loop ends on, s.
+    fn ring(pressure_mca: f32, delay_ms: usize, watch: bool) -> (f32, f32) {
+        const RUN_MS: u32 = 10_000;
+        let (p, bench, load, _, _, _) = bench_at(pressure_mca);
+        let (.., u0, mut st, mut seen) = bench_at(0.9 * pressure_mca);
+        let mut line = vec![seen; delay_ms + 1];
+        let s = ControlSettings::DEFAULT;
+        let mut reg = Regulator::new(Controlled::Pressure, seen, u0, st.speed_rpm);
+        let mut u = u0;
+        let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+        for k in 0..RUN_MS {
+            if k % CONTROL_PERIOD_MS == 0 {
+                u = reg.step(&p, load, &s, pressure_mca, seen).torque_pct;
+                if watch {
+                    reg.watch_ring(&s);
+                }
+            }
+            bench.step(&mut st, u, 1e-3, Scheme::Rk4).unwrap();
+            line.remove(0);
+            line.push(bench.signals(&st).pressure_mca);
+            lag_1ms(&mut seen, line[0], 0.02);
+            if k >= RUN_MS - 2000 {
+                (lo, hi) = (lo.min(seen), hi.max(seen));
+            }
+        }
+        (hi - lo, reg.lag_s())
+    }
+
+    /// A plant lagging more than the loop knows rings; the watch finds the ring and calms
+    /// the loop ([`Regulator::watch_ring`]), and leaves a loop that does not ring as it is.
+    #[test]
+    fn the_loop_calms_itself_when_it_rings() {
+        for sp in [1.0f32, 3.0] {
+            // 250 ms of delay: the gains the model schedules ring.
+            let (swing, lag) = ring(sp, 250, false);
+            assert!(
+                swing > 0.1 * sp && lag == 0.0,
+                "{sp} mca: {swing} mca, {lag} s"
+            );
+            let (swing, lag) = ring(sp, 250, true);
+            assert!(
+                swing < 0.02 * sp && lag >= RING_LAG_FACTOR * COVERED_LAG_PRESSURE_S,
+                "{sp} mca, watched: {swing} mca, {lag} s"
+            );
+            // 20 ms: no ring, nothing to calm.
+            let (swing, lag) = ring(sp, 20, true);
+            assert!(
+                swing < 0.01 * sp && lag == 0.0,
+                "{sp} mca, 20 ms: {swing} mca, {lag} s"
+            );
+        }
+    }
+
     /// The climb back from the reading after a hold (the VFD link's return) is a move even if
     /// the reference was under the speed cap before (a review: it integrated, +7.2 %).
     #[test]
@@ -2180,5 +2335,17 @@ mod tests {
                 last = o.torque_pct;
             }
         }
+    }
+}
+#[cfg(test)]
+mod size_probe {
+    #[test]
+    fn sz() {
+        eprintln!(
+            "SZ Regulator {} LagProbe {} Lesson {}",
+            core::mem::size_of::<super::Regulator>(),
+            core::mem::size_of::<super::LagProbe>(),
+            core::mem::size_of::<super::Lesson>()
+        );
     }
 }
