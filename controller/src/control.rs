@@ -708,8 +708,9 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
         self.regulator.as_ref()
     }
 
-    /// The plant's lag beyond the model the pressure and flow loops measured last, s
-    /// (`Regulator::lag_s`; 0 until a setpoint step of the model-based law showed one).
+    /// The plant's lag beyond the model the pressure and flow loops took last, s
+    /// (`Regulator::lag_s`: measured on the model-based law's setpoint steps, or raised by its
+    /// ring watch, `Regulator::watch_ring`; 0 until either).
     pub fn measured_lag_s(&self) -> [f32; 2] {
         self.measured_lag_s
     }
