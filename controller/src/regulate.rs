@@ -866,7 +866,7 @@ impl Regulator {
         }
         // No further than the speed limit allows (the reference then waits there, as at a
         // torque limit).
-        let capped = self.cap_reference(s.law, measured, r0, a);
+        let capped = self.cap_reference(s.law, measured, setpoint, r0, a);
         // The reference's way back from under the speed cap to the same setpoint is a load's
         // change (a valve step let it go), not a move: the integral takes it back as after
         // any valve step (held, the ×1 step after a capped ×0.7 on `pumpbench control
@@ -1132,13 +1132,20 @@ impl Regulator {
     ///   state for the reference on the load the observer estimates (the feedforward's), if
     ///   its speed is over the cap, scaled to it (a fixed point: each period the model's speed
     ///   for the reference comes nearer the cap), unless it needs more than 100 % torque (the
-    ///   torque limit binds first); between setpoint moves approached from `r0` (the reference
-    ///   before this period's filter) through the reference's filter (`a`, its weight a
-    ///   period) as a setpoint there would be. It acts before the speed passes the cap, and on
-    ///   the model's error.
+    ///   torque limit binds first); while the reference stood within [`MOVING_FRACTION`] of
+    ///   `setpoint`, approached from `r0` (the reference before this period's filter) through
+    ///   the reference's filter (`a`, its weight a period) as a setpoint there would be. It
+    ///   acts before the speed passes the cap, and on the model's error.
     ///
     /// Returns whether it lowered the reference.
-    fn cap_reference(&mut self, law: ControlLaw, measured: f32, r0: f32, a: f32) -> bool {
+    fn cap_reference(
+        &mut self,
+        law: ControlLaw,
+        measured: f32,
+        setpoint: f32,
+        r0: f32,
+        a: f32,
+    ) -> bool {
         let cap = self.speed_cap_rpm;
         // Neither rule acts under 90 % of the cap: the common case, out first (a NaN speed
         // too).
@@ -1173,18 +1180,21 @@ impl Regulator {
                 Controlled::Pressure => n.pressure_mca,
                 Controlled::Flow => n.flow_lps,
             };
-            // Between setpoint moves, approached through the reference's filter from where
-            // the reference stood (as a setpoint there would be): the observer's load, on
-            // which the model's speed hangs, moves every 50 ms with its noise. Cut at once, a
-            // review's k2 dipping 10 % for one update on a plant with a water column took the
-            // reference 14 % down (2.99 → 2.57 mca), and its way back rang at the cap (±7.5 %,
-            // never settled); through the filter it settles in 1.1 s. During a move, at once:
-            // the rotor climbs fast (through the filter, a 2 → 5 mca step on a rotor 2 × the
-            // paper's behind a 50 ms drive, the limit at 1 300 rpm, tripped). The speed guard
-            // and the reading's rule act on the speed itself, at once. (`min` passes over a
-            // NaN.)
+            // With the reference at its setpoint (within [`MOVING_FRACTION`] of it), approached
+            // through the reference's filter from where it stood (as a setpoint there would be):
+            // the observer's load, on which the model's speed hangs, moves every 50 ms with
+            // its noise. Cut at once, a review's k2 dipping 10 % for one update on a plant with
+            // a water column took the reference 14 % down (2.99 → 2.57 mca), and its way back
+            // rang at the cap (±7.5 %, never settled); through the filter it settles in 1.1 s.
+            // With the reference on its way (a setpoint move, or its way back from under the
+            // cap), at once: the rotor climbs with it (through the filter, a 2 → 5 mca
+            // step on a rotor 2 × the paper's behind a 50 ms drive, the limit at 1 300 rpm,
+            // tripped, and a review's plant at valve ×0.7 passed the cap by 40 rpm each time
+            // its reference climbed back, ringing ±16 %). The speed guard and the reading's
+            // rule act on the speed itself, at once. (`min` passes over a NaN.)
             let m = at_cap(value, n.speed_rpm);
-            let m = if m < r0 && !self.heading.1 {
+            let settled = (setpoint - r0).abs() <= MOVING_FRACTION * at_least(setpoint.abs(), 0.1);
+            let m = if m < r0 && settled {
                 r0 + (m - r0) * a
             } else {
                 m
