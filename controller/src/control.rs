@@ -541,8 +541,9 @@ pub struct Controller<const NP: usize, const HP: usize, const NF: usize, const H
     out: Published,
     /// The pressure or flow loop (modes 3 and 4), from its first control period on.
     regulator: Option<Regulator>,
-    /// The plant's lag beyond the model each loop measured last (pressure, flow), s: kept
-    /// across the loops' restarts (a mode switch, a law change).
+    /// The plant's lag beyond the model each loop took last (pressure, flow), s: measured on
+    /// its setpoint steps or raised by its ring watch; kept across the loops' restarts (a mode
+    /// switch, a law change).
     measured_lag_s: [f32; 2],
     /// The mode acted on at the last step (stop while held); `None` before the first.
     last_mode: Option<Mode>,
@@ -1050,9 +1051,10 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
     }
 
     /// One millisecond (see the module docs).
-    // Inlined always: each board calls it once, from its control task. Left to LLVM, a
-    // 4-byte change elsewhere in the controller made it keep this out of line and split the
-    // task: the QEMU image grew 1.5 KB past its 64 KiB (`cargo xtask bench`).
+    // Inlined always: each board's image calls it from one place, its control task (the
+    // plant protocol's session is a test image's). Left to LLVM, the ring watch's call
+    // (`Regulator::watch_ring`) made it keep this out of line and split the task: the QEMU
+    // image grew 1.5 KB past its 64 KiB (`cargo xtask bench`).
     #[inline(always)]
     pub fn step(&mut self, inp: &Inputs) -> Outputs {
         let now = self.t_ms;

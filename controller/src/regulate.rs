@@ -163,8 +163,8 @@ pub const RING_SMOOTHING: f32 = 0.2;
 /// Crossings in a row that make a ring (three periods of it). At 4 (two) the watch also
 /// calmed valve steps that rang twice and died out: on 600 random plants (docs/control.md,
 /// Limits) 16 comparisons with the PI alone lost; at 6 and 8, on 400 of them, none; 6 ended
-/// a review's ring (±17 % at 1 mca) sooner than 8 (settled in 2.9 s against 3.4, a first
-/// version of the watch).
+/// a review's ring (±17 % at 1 mca) sooner than 8 (settled in 2.9 s against 3.4, in a first
+/// version of the watch that also acted during a lesson's probation; 3.4 s with 6 now).
 pub const RING_CROSSINGS: u8 = 6;
 /// The longest half-period of a ring, control periods (1 s).
 pub const RING_GAP_PERIODS: u16 = 200;
@@ -737,9 +737,14 @@ impl Regulator {
     /// lag measured on its steps say. The lag the loop takes ([`Regulator::lag_s`]) is then
     /// raised to [`RING_LAG_FACTOR`] × what it was, at least × what the defaults cover, at
     /// most 1 s: the loop runs calmer as for a lag measured that long (λ and the lag the
-    /// error assumes, no rise of the gains between moves), for the rest of its life and in
-    /// the loops after it (the lag is kept), and a later lesson does not take it lower. The
-    /// PI alone (law 1) is not watched: it is the drive's PI, as shipped.
+    /// error assumes, no rise of the gains between moves) for the rest of its life: a later
+    /// lesson does not take it lower; a ring that goes on raises it again every
+    /// [`RING_CROSSINGS`] crossings (beyond 2 × the covered lag only λ's floor of twice the lag
+    /// still grows). The next loop (a mode switch, a law change) starts from the lag this one
+    /// ended with, but its lessons may take it lower (the floor is not carried: the QEMU
+    /// image has no bytes left for it). Periods held for a measurement that is not a number
+    /// are watched on the held error. The PI alone (law 1) is not watched: it is the drive's
+    /// PI, as shipped.
     #[inline(never)]
     pub fn watch_ring(&mut self, s: &ControlSettings) {
         if s.law != ControlLaw::Model {
@@ -2261,7 +2266,7 @@ mod tests {
 
     /// The paper's bench holding `pressure_mca` behind a reading delayed `delay_ms` and
     /// lagged 20 ms, no setpoint step to teach the loop the delay: the loop started 10 %
-    /// under the setpoint, 8 s. With `watch`, [`Regulator::watch_ring`] every period. The
+    /// under the setpoint, 10 s. With `watch`, [`Regulator::watch_ring`] every period. The
     /// reading's swing (max − min) over the last 2 s, mca, and the lag the loop ends on, s.
     fn ring(pressure_mca: f32, delay_ms: usize, watch: bool) -> (f32, f32) {
         const RUN_MS: u32 = 10_000;
@@ -2411,17 +2416,5 @@ mod tests {
                 last = o.torque_pct;
             }
         }
-    }
-}
-#[cfg(test)]
-mod size_probe {
-    #[test]
-    fn sz() {
-        eprintln!(
-            "SZ Regulator {} LagProbe {} Lesson {}",
-            core::mem::size_of::<super::Regulator>(),
-            core::mem::size_of::<super::LagProbe>(),
-            core::mem::size_of::<super::Lesson>()
-        );
     }
 }

@@ -530,8 +530,9 @@ pub struct Trace {
     /// is faster (a mode switch moves the torque at least at
     /// [`controller::control::SWITCH_RATE_MIN_PCT_PER_S`]), %/s.
     pub rate_limit_pct_per_s: f64,
-    /// The plant's lag beyond the model the pressure and flow loops measured by the run's
-    /// end, s (`Controller::measured_lag_s`; 0 if none was measured: the PI alone never does).
+    /// The plant's lag beyond the model the pressure and flow loops took by the run's end, s
+    /// (`Controller::measured_lag_s`: measured on setpoint steps or raised by the ring watch;
+    /// 0 if neither: the PI alone never does).
     pub measured_lag_s: [f32; 2],
     /// The rotor's inertia the controller measured by the run's end, × the paper's
     /// (`Controller::inertia_factor`; 1 until measured).
