@@ -163,7 +163,7 @@ pub const RING_SMOOTHING: f32 = 0.2;
 /// Crossings in a row that make a ring (three periods of it). At 4 (two) the watch also
 /// calmed valve steps that rang twice and died out: on 600 random plants (docs/control.md,
 /// Limits) 16 comparisons with the PI alone lost; at 6 and 8, on 400 of them, none; 6 ended
-/// a review's ring (±17 % at 1 mca) sooner than 8 (settled in 2.9 s against 3.4, in a first
+/// a review's ring (a 23 % swing at 1 mca) sooner than 8 (settled in 2.9 s against 3.4, in a first
 /// version of the watch that also acted during a lesson's probation; 3.4 s with 6 now).
 pub const RING_CROSSINGS: u8 = 6;
 /// The longest half-period of a ring, control periods (1 s).
