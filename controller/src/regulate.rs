@@ -173,6 +173,14 @@ pub const RING_GAP_PERIODS: u16 = 200;
 /// each further ring × 1.56 again, up to [`CALM_MAX`].
 pub const RING_LAG_FACTOR: f32 = 1.25;
 
+/// How far from `setpoint` (finite) the reference is still on its way to it, in its unit:
+/// [`MOVING_FRACTION`] of it, of 0.1 at least. The one rule for a move, its wait and the
+/// cap's filter at the setpoint.
+#[inline(always)]
+fn move_band(setpoint: f32) -> f32 {
+    MOVING_FRACTION * at_least(setpoint.abs(), 0.1)
+}
+
 /// `v`, at least `floor`: `floor` too if `v` is NaN. For a `floor` that is a number (a
 /// limit): one comparison, where [`Real::max`] pays a second for a NaN `floor` (≈ 4
 /// instructions on the M4).
@@ -879,7 +887,7 @@ impl Regulator {
         // 0.79), and the feedforward leads nothing while under it (a review: the lead came
         // back on the period after a cut, 24 → 90 % of feedforward at 1 870 rpm, and a light
         // rotor tripped; it also made the torque chatter at the cap).
-        let band = MOVING_FRACTION * Real::max(setpoint.abs(), 0.1);
+        let band = move_band(setpoint);
         let far = (setpoint - self.reference).abs() > band;
         if capped {
             self.capped_under = Some(setpoint);
@@ -1198,7 +1206,7 @@ impl Regulator {
             // its reference climbed back, ringing ±16 %). The speed guard and the reading's
             // rule act on the speed itself, at once. (`min` passes over a NaN.)
             let m = at_cap(value, n.speed_rpm);
-            let settled = (setpoint - r0).abs() <= MOVING_FRACTION * at_least(setpoint.abs(), 0.1);
+            let settled = (setpoint - r0).abs() <= move_band(setpoint);
             let m = if m < r0 && settled {
                 r0 + (m - r0) * a
             } else {
