@@ -780,10 +780,9 @@ impl Regulator {
     /// lesson does not take it lower; a ring that goes on raises it again every
     /// [`RING_CROSSINGS`] crossings (beyond 2 × the covered lag only λ's floor of twice the lag
     /// still grows). The next loop (a mode switch, a law change) starts from the lag this one
-    /// ended with, but its lessons may take it lower (the floor is not carried: the QEMU
-    /// image has no bytes left for it). Periods held for a measurement that is not a number
-    /// are watched on the held error. The PI alone (law 1) is not watched: it is the drive's
-    /// PI, as shipped.
+    /// ended with, but its lessons may take it lower (the floor is not carried over). Periods
+    /// held for a measurement that is not a number are watched on the held error. The PI
+    /// alone (law 1) is not watched: it is the drive's PI, as shipped.
     #[inline(never)]
     pub fn watch_ring(&mut self, s: &ControlSettings) {
         if s.law != ControlLaw::Model {
