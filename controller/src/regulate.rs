@@ -562,7 +562,11 @@ pub struct Regulator {
     guard_pct: f32,
     /// The ring watch ([`Regulator::watch_ring`]): the error smoothed, its largest size
     /// since the last crossing and between the two before, the side of the band it was last
-    /// beyond (0: none), the crossings in a row, the periods since the last.
+    /// beyond (0: none), the crossings in a row, the periods since the last. The smoothed
+    /// error is updated by the watch only (each period after [`Regulator::step`], as
+    /// `Controller::step` calls it) and also gives the step its error's rate
+    /// ([`AHEAD_OF_THE_ERROR`]): a caller that steps a model-law loop without the watch
+    /// reads that rate against 0, as if the error had just jumped.
     ring_e: f32,
     ring_peak: f32,
     ring_last_peak: f32,
@@ -772,8 +776,8 @@ impl Regulator {
     /// beyond one side to beyond the other, each within [`RING_GAP_PERIODS`] of the last, are
     /// a ring; so is, from the third crossing on, a swing (the error's peak between two
     /// crossings) of at least [`RING_LARGE_FRACTION`] of the setpoint and
-    /// [`RING_DECAY_RATIO`] of the swing before it: the loop's gain is too high for a plant that lags more than the model and the
-    /// lag measured on its steps say. The lag the loop takes ([`Regulator::lag_s`]) is then
+    /// [`RING_DECAY_RATIO`] of the swing before it: the loop's gain is too high for a plant
+    /// that lags more than the model and the lag measured on its steps say. The lag the loop takes ([`Regulator::lag_s`]) is then
     /// raised to [`RING_LAG_FACTOR`] × what it was, at least × what the defaults cover, at
     /// most 1 s: the loop runs calmer as for a lag measured that long (λ and the lag the
     /// error assumes, no rise of the gains between moves) for the rest of its life: a later
@@ -1977,11 +1981,11 @@ mod tests {
             // rate is 0.2 × (band − 1.25 band) per 5 ms), none ahead: the moves' gains; at
             // half that rate, half the band ahead; opening, the whole rise.
             let covered = COVERED_LAG_PRESSURE_S * AHEAD_OF_THE_ERROR;
-            let k = period_s / (RING_SMOOTHING * covered);
+            let per_lag = period_s / (RING_SMOOTHING * covered);
             for (smoothed, x) in [
-                (band * (1.0 + k), 0.0),
-                (band * (1.0 + 0.5 * k), 0.5),
-                (band * (1.0 - k), 1.0),
+                (band * (1.0 + per_lag), 0.0),
+                (band * (1.0 + 0.5 * per_lag), 0.5),
+                (band * (1.0 - per_lag), 1.0),
             ] {
                 let (got, want) = (slope_ahead(&reg, 3.0, band, smoothed), want(x));
                 for k in 0..2 {
