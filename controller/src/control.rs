@@ -38,6 +38,7 @@ use crate::types::{
     Arithmetic, ControlLaw, ControlSettings, InjectedFaults, Mode, Published, Status,
 };
 use crate::vfd::{VfdMap, VfdReadings};
+use model_core::drive_lag::DriveLagProbe;
 use model_core::excitation::McuPulses;
 use model_core::inertia::InertiaProbe;
 use model_core::inverse::Load;
@@ -521,6 +522,11 @@ pub struct Controller<const NP: usize, const HP: usize, const NF: usize, const H
     inertia: InertiaProbe<f32>,
     /// Its factor, × the paper's J, as of the last drive reading.
     inertia_factor: f32,
+    /// The drive's torque lag, measured on its torque readings against the references sent
+    /// (the readings taken on the loops' control ticks), and [`VfdStatus::reads_ok`] at the
+    /// last reading it took.
+    drive_lag: DriveLagProbe<f32>,
+    drive_lag_reads: u32,
     /// Applied torque summed since the last observer step, % · ticks, and the ticks.
     torque_sum: f32,
     torque_ticks: u32,
@@ -633,6 +639,8 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             observer,
             monitor: Monitor::new(MonitorConfig::paper()),
             inertia: InertiaProbe::new(),
+            drive_lag: DriveLagProbe::new(),
+            drive_lag_reads: 0,
             inertia_factor: 1.0,
             torque_sum: 0.0,
             torque_ticks: 0,
@@ -720,6 +728,12 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
     /// ([`model_core::inertia::InertiaProbe::factor`]: 1 until a move has shown it).
     pub fn inertia_factor(&self) -> f32 {
         self.inertia_factor
+    }
+
+    /// The drive's torque lag measured from its torque readings, s
+    /// ([`model_core::drive_lag::DriveLagProbe::lag_s`]: 0 until the torque has moved).
+    pub fn drive_lag_s(&self) -> f32 {
+        self.drive_lag.lag_s()
     }
 
     /// What the SCADA registers hold now.
@@ -972,6 +986,16 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             Regulator::new(controlled, measured, applied, v.speed_rpm).with_lag(lag_s)
         });
         r.set_inertia(self.inertia_factor);
+        // A fresh torque reading teaches the drive's lag (here, off the observer's tick: the
+        // tick's longest).
+        if inp.vfd.reads_ok != self.drive_lag_reads {
+            self.drive_lag_reads = inp.vfd.reads_ok;
+            if let Some(d) = inp.vfd.readings {
+                self.drive_lag
+                    .read(d.torque_pct, &self.whitebox.params().gamma);
+            }
+        }
+        r.set_drive_lag(self.drive_lag.lag_s());
         // The cap keeps the pump out of the overspeed trip: none where overspeed only warns
         // (holding register 6; a review: it cost 10.6 % of the pressure there for nothing).
         let p = &inp.commands.protection;
@@ -1094,6 +1118,7 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
         self.last_requested_pct = requested;
         self.torque_sum += u;
         self.torque_ticks += 1;
+        self.drive_lag.applied(1e-3, u);
 
         if inp.commands.arithmetic != self.arithmetic {
             // The other arithmetic's history is stale: start it at the last predictions.

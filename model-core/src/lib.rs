@@ -39,7 +39,8 @@
 //! with its standard deviation; [`monitor`] turns it and the measurements into alarms (dry
 //! run, no flow, end of curve, load changed, model residual, transmitter and link faults) and
 //! hands its drive readings on to [`inertia`], which measures the rotor's inertia for the
-//! controller's loops and the dry-run rule.
+//! controller's loops and the dry-run rule; [`drive_lag`] measures the drive's torque lag from
+//! its torque readings, for the loops' braking.
 //!
 //! # Use
 //!
@@ -56,6 +57,7 @@
 // `!(x > 0.0)` is deliberate throughout: unlike `x <= 0.0` it is also true for NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod drive_lag;
 pub mod dsp;
 pub mod equations;
 pub mod error;

@@ -537,6 +537,9 @@ pub struct Trace {
     /// The rotor's inertia the controller measured by the run's end, × the paper's
     /// (`Controller::inertia_factor`; 1 until measured).
     pub inertia_factor: f32,
+    /// The drive's torque lag the controller measured by the run's end, s
+    /// (`Controller::drive_lag_s`; 0 until measured).
+    pub drive_lag_s: f32,
     /// The time a protection held the torque at 0 % (status bit 7), s.
     pub tripped_s: f64,
 }
@@ -681,6 +684,7 @@ pub fn run(
         ),
         measured_lag_s: [0.0; 2],
         inertia_factor: 1.0,
+        drive_lag_s: 0.0,
         tripped_s: 0.0,
     };
     let mut last_torque: Option<f32> = None;
@@ -761,6 +765,7 @@ pub fn run(
             eprintln!("LAG {} {:?}", t, c.measured_lag_s());
         }
         trace.inertia_factor = c.inertia_factor();
+        trace.drive_lag_s = c.drive_lag_s();
         plant.apply(&reply)?;
         trace.samples.push(Sample {
             t_s: t as f64 * 1e-3,
@@ -1135,7 +1140,8 @@ pub fn report(
             s,
             "{}: torque NaN steps {}, outside its limits {}, largest change into a period with \
              the link up {:.1} %/s; measured plant lag: pressure {:.0} ms, flow {:.0} ms; \
-             rotor inertia measured: {:.2} × the paper's; tripped (a protection's 0 %) {:.3} s",
+             rotor inertia measured: {:.2} × the paper's; drive lag measured: {:.0} ms; tripped \
+             (a protection's 0 %) {:.3} s",
             trace.law.name(),
             trace.nan_steps,
             trace.out_of_limits,
@@ -1143,6 +1149,7 @@ pub fn report(
             trace.measured_lag_s[0] * 1000.0,
             trace.measured_lag_s[1] * 1000.0,
             trace.inertia_factor,
+            trace.drive_lag_s * 1000.0,
             trace.tripped_s
         );
     }

@@ -349,6 +349,37 @@ fn a_heavier_rotor_is_measured_and_followed() {
     }
 }
 
+/// The drive's torque lag is measured from its torque readings during the loop's moves
+/// (`model_core::drive_lag`): the built-in plant's drive lag, and a drive with none reads
+/// none (its moves are one frame's ramp: too little evidence).
+#[test]
+fn the_drives_lag_is_measured() {
+    for (lag, lo, hi) in [(0.0, 0.0, 0.5), (20.0, 20.0, 28.0), (60.0, 60.0, 68.0)] {
+        let out = pumpbench(&[
+            "control",
+            "--scenario",
+            "pressure-steps",
+            "--controller",
+            "model",
+            "--drive-lag-ms",
+            &format!("{lag}"),
+        ]);
+        let stdout = ok(&out, "control");
+        let measured: f64 = stdout
+            .split("drive lag measured: ")
+            .nth(1)
+            .and_then(|t| t.split(' ').next())
+            .and_then(|t| t.parse().ok())
+            .unwrap_or_else(|| panic!("no drive lag: {stdout}"));
+        // (The interval between readings reads as about half of it more: ≤ 2.5 ms, and the
+        // print rounds to 1 ms.)
+        assert!(
+            (lo..=hi).contains(&measured),
+            "{lag} ms: measured {measured} ms"
+        );
+    }
+}
+
 /// A rotor of four times the paper's inertia coasts at 0 % torque on a downward pressure step
 /// for seconds: with the paper's J in the dry-run rule the motion showed a quarter of the load
 /// and tripped dry run (latched) at 10.3 s; with the J measured on the first step, no trip
