@@ -2205,13 +2205,29 @@ mod tests {
     /// came down while the reading was still short of the setpoint (ms after the step; none:
     /// `None`).
     fn heavy_step(speed_known: bool) -> (f32, Option<u32>) {
-        let mut heavy = BenchParams::<f32>::PAPER;
-        heavy.inertia_kg_m2 *= 2.0;
-        let (p, bench, load, u0, mut st, mut seen) = bench_on(heavy, 1.0);
+        step_up(2.0, 0.0, 0.13, speed_known, 0.0)
+    }
+
+    /// The 1 → 3 mca step on a rotor `j` × the paper's (measured), its torque lagging the
+    /// reference by `drive_s` (s; 0: none) behind a `transmitter_s` pressure transmitter, the
+    /// speed given every period or not, the loop told a drive lag of `told_s`: the true
+    /// pressure's overshoot (% of the step) and the time the torque first came down while
+    /// the reading was still short of the setpoint (ms after the step; none: `None`).
+    fn step_up(
+        j: f32,
+        drive_s: f32,
+        transmitter_s: f32,
+        speed_known: bool,
+        told_s: f32,
+    ) -> (f32, Option<u32>) {
+        let mut plant = BenchParams::<f32>::PAPER;
+        plant.inertia_kg_m2 *= j;
+        let (p, bench, load, u0, mut st, mut seen) = bench_on(plant, 1.0);
         let s = ControlSettings::DEFAULT;
         let mut reg = Regulator::new(Controlled::Pressure, seen, u0, st.speed_rpm);
-        reg.set_inertia(2.0);
-        let (mut u, mut top, mut early) = (u0, 1.0f32, None);
+        reg.set_inertia(j);
+        reg.set_drive_lag(told_s);
+        let (mut u, mut te, mut top, mut early) = (u0, u0, 1.0f32, None);
         for k in 0..4000u32 {
             if k % CONTROL_PERIOD_MS == 0 {
                 if speed_known {
@@ -2223,10 +2239,15 @@ mod tests {
                 }
                 u = next;
             }
-            bench.step(&mut st, u, 1e-3, Scheme::Rk4).unwrap();
+            if drive_s > 0.0 {
+                lag_1ms(&mut te, u, drive_s);
+            } else {
+                te = u;
+            }
+            bench.step(&mut st, te, 1e-3, Scheme::Rk4).unwrap();
             let now = bench.signals(&st).pressure_mca;
             top = top.max(now);
-            lag_1ms(&mut seen, now, 0.13);
+            lag_1ms(&mut seen, now, transmitter_s);
         }
         ((top - 3.0) / 2.0 * 100.0, early)
     }
@@ -2249,39 +2270,6 @@ mod tests {
         );
     }
 
-    /// The 1 → 3 mca step on a rotor 1.25 × the paper's (measured) behind a drive whose
-    /// torque lags its reference by 80 ms and a 140 ms transmitter (the speed given every
-    /// period), the loop told the drive's lag (`Regulator::set_drive_lag`, as the controller
-    /// measures it) or not: the true pressure's overshoot (% of the step) and the period the
-    /// torque first came down (ms after the step). (A random plant of those lags overshot
-    /// 13 %, the most of its set.)
-    fn lagged_drive_step(told: bool) -> (f32, Option<u32>) {
-        let mut heavy = BenchParams::<f32>::PAPER;
-        heavy.inertia_kg_m2 *= 1.25;
-        let (p, bench, load, u0, mut st, mut seen) = bench_on(heavy, 1.0);
-        let s = ControlSettings::DEFAULT;
-        let mut reg = Regulator::new(Controlled::Pressure, seen, u0, st.speed_rpm);
-        reg.set_inertia(1.25);
-        reg.set_drive_lag(if told { 0.08 } else { 0.0 });
-        let (mut u, mut te, mut top, mut down) = (u0, u0, 1.0f32, None);
-        for k in 0..4000u32 {
-            if k % CONTROL_PERIOD_MS == 0 {
-                reg.set_speed_limit(0.0, st.speed_rpm);
-                let next = reg.step(&p, load, &s, 3.0, seen).torque_pct;
-                if down.is_none() && next < u {
-                    down = Some(k);
-                }
-                u = next;
-            }
-            lag_1ms(&mut te, u, 0.08);
-            bench.step(&mut st, te, 1e-3, Scheme::Rk4).unwrap();
-            let now = bench.signals(&st).pressure_mca;
-            top = top.max(now);
-            lag_1ms(&mut seen, now, 0.14);
-        }
-        ((top - 3.0) / 2.0 * 100.0, down)
-    }
-
     /// Told the drive's lag, the braking of a move starts that much earlier
     /// ([`BRAKE_DEAD_TIME_S`] plus the lag) and the step overshoots less: 6.3 % of the step
     /// against 13.1 %. (Not everywhere: on a rotor 0.6 × the paper's behind a 100 ms
@@ -2289,8 +2277,10 @@ mod tests {
     /// measure, docs/control.md, The loop.)
     #[test]
     fn the_braking_waits_for_a_drive_that_lags() {
-        let (told, told_down) = lagged_drive_step(true);
-        let (blind, blind_down) = lagged_drive_step(false);
+        // A rotor 1.25 × the paper's (measured) behind an 80 ms drive and a 140 ms
+        // transmitter (a random plant of those lags overshot 13 %, the most of its set).
+        let (told, told_down) = step_up(1.25, 0.08, 0.14, true, 0.08);
+        let (blind, blind_down) = step_up(1.25, 0.08, 0.14, true, 0.0);
         eprintln!("overshoot {told:.2} % (first down {told_down:?} ms), not told {blind:.2} % ({blind_down:?})");
         assert!(told < 0.7 * blind, "{told} vs {blind}");
         assert!(

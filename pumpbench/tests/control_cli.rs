@@ -314,29 +314,13 @@ fn the_comparisons_with_the_pi_alone_are_tallied() {
 #[test]
 fn a_heavier_rotor_is_measured_and_followed() {
     for (f, seed) in [("2", "1"), ("2", "5"), ("0.5", "1")] {
-        let out = pumpbench(&[
-            "control",
-            "--scenario",
-            "pressure-steps",
-            "--controller",
-            "model",
-            "--targets",
-            "--rotor-inertia",
-            f,
-            "--seed",
-            seed,
-        ]);
+        let out = model_pressure_steps(&["--targets", "--rotor-inertia", f, "--seed", seed]);
         let stdout = ok(&out, "control");
         assert!(
             stdout.contains(&format!("rotor inertia {f} × the paper's")),
             "{stdout}"
         );
-        let measured: f64 = stdout
-            .split("rotor inertia measured: ")
-            .nth(1)
-            .and_then(|t| t.split(' ').next())
-            .and_then(|t| t.parse().ok())
-            .unwrap_or_else(|| panic!("no inertia measured: {stdout}"));
+        let measured = measured_on_first_line(&stdout, "rotor inertia measured: ");
         let want: f64 = f.parse().unwrap();
         assert!(
             (measured / want - 1.0).abs() < 0.05,
@@ -355,22 +339,9 @@ fn a_heavier_rotor_is_measured_and_followed() {
 #[test]
 fn the_drives_lag_is_measured() {
     for (lag, lo, hi) in [(0.0, 0.0, 0.5), (20.0, 20.0, 28.0), (60.0, 60.0, 68.0)] {
-        let out = pumpbench(&[
-            "control",
-            "--scenario",
-            "pressure-steps",
-            "--controller",
-            "model",
-            "--drive-lag-ms",
-            &format!("{lag}"),
-        ]);
+        let out = model_pressure_steps(&["--drive-lag-ms", &format!("{lag}")]);
         let stdout = ok(&out, "control");
-        let measured: f64 = stdout
-            .split("drive lag measured: ")
-            .nth(1)
-            .and_then(|t| t.split(' ').next())
-            .and_then(|t| t.parse().ok())
-            .unwrap_or_else(|| panic!("no drive lag: {stdout}"));
+        let measured = measured_on_first_line(&stdout, "drive lag measured: ");
         // (The interval between readings reads as about half of it more: ≤ 2.5 ms, and the
         // print rounds to 1 ms.)
         assert!(
@@ -560,6 +531,29 @@ fn plant_stdio_refuses_the_built_in_plants_options() {
 
 /// The model law's and the PI alone's values of figure `label` in each row that prints it
 /// (`-`, a figure never reached, as NaN).
+/// `pumpbench control --scenario pressure-steps --controller model` with `extra` options.
+fn model_pressure_steps(extra: &[&str]) -> std::process::Output {
+    let mut args = vec![
+        "control",
+        "--scenario",
+        "pressure-steps",
+        "--controller",
+        "model",
+    ];
+    args.extend_from_slice(extra);
+    pumpbench(&args)
+}
+
+/// The number after `label` on the first law's summary line (`model: torque NaN steps …`).
+fn measured_on_first_line(stdout: &str, label: &str) -> f64 {
+    stdout
+        .split(label)
+        .nth(1)
+        .and_then(|t| t.split(' ').next())
+        .and_then(|t| t.parse().ok())
+        .unwrap_or_else(|| panic!("no {label}in: {stdout}"))
+}
+
 fn figure_rows(stdout: &str, label: &str) -> Vec<[f64; 2]> {
     stdout
         .lines()
