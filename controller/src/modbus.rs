@@ -255,9 +255,10 @@ pub fn request_at_end(bytes: &[u8]) -> Option<usize> {
     if n >= 8 && request_complete(&bytes[n - 8..]) {
         return Some(n - 8);
     }
-    (0..n.saturating_sub(10))
-        .rev()
-        .find(|&start| matches!(bytes[start + 1], 15 | 16) && request_complete(&bytes[start..]))
+    (0..n.saturating_sub(10)).rev().find(|&start| {
+        matches!(bytes.get(start + 1), Some(15 | 16))
+            && bytes.get(start..).is_some_and(request_complete)
+    })
 }
 
 /// A Modbus exception code a register map answers with.

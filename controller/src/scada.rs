@@ -327,10 +327,14 @@ pub fn input_registers(p: &Published) -> [u16; INPUT_REGISTERS] {
     for (k, &(i, x, scale, max)) in scaled.iter().enumerate() {
         let twin = k >= scaled.len() - 2;
         let saturated_before = f.saturated;
-        r[usize::from(i)] = match max {
+        let v = match max {
             Some(max) => f.unsigned(x, scale, max),
             None => f.signed(x, scale),
         };
+        // (Every address in the table is in the block; `get_mut`: no bounds check's panic.)
+        if let Some(w) = r.get_mut(usize::from(i)) {
+            *w = v;
+        }
         if twin {
             f.saturated = saturated_before;
         }

@@ -351,8 +351,10 @@ impl<V: Copy, const F: usize> Ring<V, F> {
     /// The F frames, newest first.
     #[inline(always)]
     fn window(&self) -> &[V; F] {
+        // (`get`, not indexing: `pos` < F always, but a bounds check's panic would link its
+        // formatting into the image.)
         let flat = self.frames.as_flattened();
-        match flat[self.pos..].first_chunk::<F>() {
+        match flat.get(self.pos..).and_then(<[V]>::first_chunk::<F>) {
             Some(w) => w,
             None => &self.frames[0],
         }
@@ -361,7 +363,12 @@ impl<V: Copy, const F: usize> Ring<V, F> {
     /// Makes `v` frame 0 (the oldest frame leaves).
     #[inline(always)]
     fn push(&mut self, v: V, y_clamped: bool, u_clamped: bool) {
-        let pos = if self.pos == 0 { F - 1 } else { self.pos - 1 };
+        // (`pos` ≤ F − 1 for the compiler too: no bounds check below.)
+        let pos = if self.pos == 0 || self.pos > F {
+            F - 1
+        } else {
+            self.pos - 1
+        };
         self.pos = pos;
         self.frames[0][pos] = v;
         self.frames[1][pos] = v;

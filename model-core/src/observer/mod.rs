@@ -634,9 +634,12 @@ impl<T: Real> Observer<T> {
     fn bound(&mut self) {
         let c = &self.cfg;
         self.x[K2] = self.x[K2].max(c.k2_range.0).min(c.k2_range.1);
-        for i in [HEAD_SCALE, TORQUE_SCALE] {
-            self.x[i] = self.x[i].max(c.scale_range.0).min(c.scale_range.1);
-        }
+        // (Written out: the loop over the two indices kept a bounds check on the M4, and its
+        // panic's formatting in the image.)
+        self.x[HEAD_SCALE] = self.x[HEAD_SCALE].max(c.scale_range.0).min(c.scale_range.1);
+        self.x[TORQUE_SCALE] = self.x[TORQUE_SCALE]
+            .max(c.scale_range.0)
+            .min(c.scale_range.1);
         self.x[SPEED] = self.x[SPEED].max(T::ZERO);
         self.x[FLOW_LAGGED] = self.x[FLOW_LAGGED].max(T::ZERO);
     }
