@@ -2239,11 +2239,8 @@ mod tests {
                 }
                 u = next;
             }
-            if drive_s > 0.0 {
-                lag_1ms(&mut te, u, drive_s);
-            } else {
-                te = u;
-            }
+            // (A lag of 0: the torque as set.)
+            lag_1ms(&mut te, u, drive_s);
             bench.step(&mut st, te, 1e-3, Scheme::Rk4).unwrap();
             let now = bench.signals(&st).pressure_mca;
             top = top.max(now);

@@ -129,6 +129,7 @@ impl<T: Real> DriveLagProbe<T> {
 mod tests {
     use super::*;
     use crate::excitation::SplitMix64;
+    use crate::transmitter::lag_1ms;
 
     /// Eq. (4) as the identity: Te(u) = u.
     const UNIT: [f32; 6] = [0.0, 0.0, 0.0, 0.0, 1.0, 0.0];
@@ -147,11 +148,7 @@ mod tests {
                 50.0 - step
             };
             u += (target - u).clamp(-0.2, 0.2);
-            te = if lag_s > 0.0 {
-                te + (u - te) * (1.0 - (-0.001 / lag_s).exp())
-            } else {
-                u
-            };
+            lag_1ms(&mut te, u, lag_s);
             let reading = (k % every == every - 1).then(|| te + rng.uniform(-0.1, 0.1) as f32);
             p.applied(0.001, u);
             if let Some(r) = reading {
@@ -207,7 +204,7 @@ mod tests {
         for k in 0..6_000u32 {
             let target = if (k / 300) % 2 == 0 { 70.0 } else { 30.0 };
             u += (target - u).clamp(-0.2, 0.2);
-            te += (u - 3.0 - te) * (1.0 - (-0.001f32 / 0.05).exp());
+            lag_1ms(&mut te, u - 3.0, 0.05);
             p.applied(0.001, u);
             if k % 5 == 4 {
                 p.read(te, &UNIT);
