@@ -110,7 +110,7 @@ const ROWS: &[Row] = &[
     Row::new("monitor_update", 400, monitor_update),
     // The controller's whole 1 ms tick on the virtual bench, profile mode, 20 s.
     Row::new("tick_mean", 20_000, tick).with_max("tick_max"),
-    // The pressure loop's period (mode 3, model-based: the warm-started inverse twice, the
+    // The pressure loop's period (mode 3, model-based: the warm-started inverse, the
     // linearisation, the PI) on the white-box, pressure steps 2 → 4 → 1 → 3 mca, 5 s each.
     Row::new("regulator_step", 4000, regulator_step).with_max("regulator_step_max"),
     // The whole tick in mode 3 on the virtual bench, the same steps, 20 s: held to the
@@ -397,8 +397,9 @@ const LOOP_STEP_MS: u32 = 5000;
 
 /// The loop's period on the white-box bench: pressure steps 2 → 4 → 1 → 3 mca, the load as
 /// the observer gives it, a new estimate every 50 ms (k2 wandering ±1 %, so the feedforward's
-/// load change runs its second inverse every 10th period, as in the firmware), the speed the
-/// bench's.
+/// load change enters every 10th period, as in the firmware: between moves the last period's
+/// solution is the old load's, during a move it is moved along the model's gain), the speed
+/// the bench's.
 fn regulator_step(c: &mut Cost, n: u32) -> Result<(), Error> {
     use controller::regulate::{Controlled, Regulator, CONTROL_PERIOD_MS};
     use controller::types::ControlSettings;
