@@ -615,11 +615,11 @@ pub struct Regulator {
 struct Excursion {
     /// The integral when it began, % (the settled loop's model error).
     from_integral: f32,
-    /// The static feedforward when it began, %: its change since, the other way, is what
-    /// the integral took (the reference stands at its setpoint: the load moved it).
-    from_ff: f32,
-    /// What has gone into the torque since, % (on the integral's side).
-    released: f32,
+    /// The feedforward's changes from the load the integral took since, and not yet
+    /// released, % (the integral's side: a load needing less torque adds to it). Counted
+    /// where the load's change enters, not as the feedforward's change: the reference moves
+    /// too (back from under the speed cap, or still converging to its setpoint).
+    taken: f32,
 }
 
 impl Regulator {
@@ -1123,16 +1123,15 @@ impl Regulator {
         // that part was counted twice). Not past what it took: the rest, if the observer's
         // load is off, is the integral's to learn.
         if let Some(x) = self.excursion.as_mut() {
-            let taken = x.from_ff - ff - x.released;
             let gained = self.integral_pct - x.from_integral;
-            let part = if taken > 0.0 {
-                at_most(at_least(gained, 0.0), taken)
+            let part = if x.taken > 0.0 {
+                at_most(at_least(gained, 0.0), x.taken)
             } else {
-                at_most(at_least(gained, taken), 0.0)
+                at_most(at_least(gained, x.taken), 0.0)
             };
             let released = part * (period_s / LOAD_RELEASE_S);
             self.integral_pct -= released;
-            x.released += released;
+            x.taken -= released;
         }
         let ff = ff + lead;
         let di = gains.kc * period_s / gains.ti_s * e;
@@ -1186,7 +1185,7 @@ impl Regulator {
             self.excursion = None;
             self.settled = 0;
         } else {
-            self.track_excursion(s.law, e, band, ff - lead);
+            self.track_excursion(s.law, e, band);
         }
         self.last_pct = torque;
         self.last = RegulatorOutput {
@@ -1225,17 +1224,23 @@ impl Regulator {
         e.abs() > band || e * short < 0.0
     }
 
-    /// The excursion's bookkeeping at the end of a period with the error `e` and the static
-    /// feedforward `ff`: one begins
+    /// The excursion's bookkeeping at the end of a period with the error `e`: one begins
     /// when the error leaves the `band` ([`MOVING_FRACTION`] of the setpoint) after
     /// [`SETTLED_PERIODS`] within [`SETTLED_FRACTION`] of it, and ends when it is back
-    /// there. None with the PI alone, at a range limit or with the steady state beyond the
-    /// torque's range (a saturated loop's integral is no steady state); nor during a move or
+    /// there. None with the PI alone, at a range limit, with the steady state beyond the
+    /// torque's range or the reference under the speed cap or on its way back from it (a
+    /// saturated or capped loop's integral is no steady state at the setpoint: from a capped
+    /// ×0.7, the release kept the torque up on the way back and a light rotor passed the
+    /// overspeed limit, 1 500 rpm, by 0.4 rpm where it had stayed 10 rpm under); nor during a move or
     /// its wait (the caller's). Out of line (as `waits`): the moves' periods, the longest,
     /// pay only for the reset.
     #[inline(never)]
-    fn track_excursion(&mut self, law: ControlLaw, e: f32, band: f32, ff: f32) {
-        if law != ControlLaw::Model || self.at_range_limit || self.near.limited {
+    fn track_excursion(&mut self, law: ControlLaw, e: f32, band: f32) {
+        if law != ControlLaw::Model
+            || self.at_range_limit
+            || self.near.limited
+            || self.capped_under.is_some()
+        {
             self.excursion = None;
             self.settled = 0;
             return;
@@ -1251,8 +1256,7 @@ impl Regulator {
         if self.excursion.is_none() && size > band && self.settled >= SETTLED_PERIODS {
             self.excursion = Some(Excursion {
                 from_integral: self.integral_pct,
-                from_ff: ff,
-                released: 0.0,
+                taken: 0.0,
             });
         }
         self.settled = 0;
@@ -1482,7 +1486,11 @@ impl Regulator {
                     .map(|o| o.torque_ref_pct)
             };
             if let Some(old) = old {
-                self.integral_pct -= inv.torque_ref_pct - old;
+                let change = inv.torque_ref_pct - old;
+                self.integral_pct -= change;
+                if let Some(x) = self.excursion.as_mut() {
+                    x.taken -= change;
+                }
             }
         }
         let Some(l) = l else {
