@@ -1122,16 +1122,8 @@ impl Regulator {
         // the feedforward (what it had learnt of the change before the observer saw it too:
         // that part was counted twice). Not past what it took: the rest, if the observer's
         // load is off, is the integral's to learn.
-        if let Some(x) = self.excursion.as_mut() {
-            let gained = self.integral_pct - x.from_integral;
-            let part = if x.taken > 0.0 {
-                at_most(at_least(gained, 0.0), x.taken)
-            } else {
-                at_most(at_least(gained, x.taken), 0.0)
-            };
-            let released = part * (period_s / LOAD_RELEASE_S);
-            self.integral_pct -= released;
-            x.taken -= released;
+        if self.excursion.is_some() {
+            self.release(period_s);
         }
         let ff = ff + lead;
         let di = gains.kc * period_s / gains.ti_s * e;
@@ -1222,6 +1214,24 @@ impl Regulator {
         self.closest = Real::min(self.closest, short.abs());
         self.arriving -= 1;
         e.abs() > band || e * short < 0.0
+    }
+
+    /// One period's release of an excursion's load change into the torque (see
+    /// [`LOAD_RELEASE_S`]), `period_s` the control period, s. Out of line, and called only
+    /// during an excursion (as `waits`).
+    #[inline(never)]
+    fn release(&mut self, period_s: f32) {
+        if let Some(x) = self.excursion.as_mut() {
+            let gained = self.integral_pct - x.from_integral;
+            let part = if x.taken > 0.0 {
+                at_most(at_least(gained, 0.0), x.taken)
+            } else {
+                at_most(at_least(gained, x.taken), 0.0)
+            };
+            let released = part * (period_s / LOAD_RELEASE_S);
+            self.integral_pct -= released;
+            x.taken -= released;
+        }
     }
 
     /// The excursion's bookkeeping at the end of a period with the error `e`: one begins
