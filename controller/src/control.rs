@@ -1118,7 +1118,11 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
         self.last_requested_pct = requested;
         self.torque_sum += u;
         self.torque_ticks += 1;
-        self.drive_lag.applied(1e-3, u);
+        // The drive's lag learns only in the loops (its readings are taken there): outside
+        // them the sum would only be thrown away at the next reading.
+        if self.regulator.is_some() {
+            self.drive_lag.applied(1e-3, u);
+        }
 
         if inp.commands.arithmetic != self.arithmetic {
             // The other arithmetic's history is stale: start it at the last predictions.

@@ -1118,10 +1118,10 @@ impl Regulator {
         }
         // The load's change the integral took during an excursion goes into the torque over
         // [`LOAD_RELEASE_S`]: the integral returns toward its settled value (the model's error
-        // before the load changed), by what it gained beyond it, no more than it took from
-        // the feedforward (what it had learnt of the change before the observer saw it too:
-        // that part was counted twice). Not past what it took: the rest, if the observer's
-        // load is off, is the integral's to learn.
+        // before the load changed), by what it gained beyond it, no more than it took of the
+        // observer's load changes (what it had learnt of the change before the observer saw
+        // it too: that part was counted twice). Not past what it took: the rest, if the
+        // observer's load is off, is the integral's to learn.
         if self.excursion.is_some() {
             self.release(period_s);
         }
@@ -1471,6 +1471,8 @@ impl Regulator {
         self.load = Some(load);
         self.near = inv;
         let l = linearise(bench, load, &inv);
+        // (NaN without a linearisation: no first-order step below. An `Option` here cost
+        // 184 B of the QEMU image.)
         let gain = match (c, l) {
             (Controlled::Pressure, Some(l)) => l.pressure_gain_mca_per_pct,
             (Controlled::Flow, Some(l)) => l.flow_gain_lps_per_pct,
