@@ -11,7 +11,7 @@ Each plant draws, from one seeded generator (the same seed, the same plants):
 
 Usage:
   python3 tools/random_plants.py --bin target/release/pumpbench --plants 200 --seed 3 \
-      [--jobs 2] [--out runs.tsv] [--against older.tsv]
+      [--jobs 2] [--out runs.tsv] [--against older.tsv] [--speed-lag-ms 50]
 
 Prints the totals (figure targets met by each law, comparisons the model law won, trips,
 NaN or torque-limit failures), the model law's misses per scenario and figure, and with
@@ -105,10 +105,16 @@ def main():
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--out", help="write one row per run (tab-separated) here")
     ap.add_argument("--against", help="an earlier --out file of the same plants: runs that changed")
+    ap.add_argument("--speed-lag-ms", type=float, default=0.0,
+                    help="every plant's drive reads its speed through this lag, ms (the same "
+                         "plants otherwise; 0: none, the speed as it is)")
     a = ap.parse_args()
 
     rng = random.Random(a.seed)
     plants = [draw(rng) for _ in range(a.plants)]
+    if a.speed_lag_ms > 0:
+        for p in plants:
+            p["speed-lag-ms"] = a.speed_lag_ms
     work = [(i, p, s) for i, p in enumerate(plants) for s in SCENARIOS]
     results = {}
     failed = []

@@ -522,6 +522,8 @@ pub struct Controller<const NP: usize, const HP: usize, const NF: usize, const H
     inertia: InertiaProbe<f32>,
     /// Its factor, × the paper's J, as of the last drive reading.
     inertia_factor: f32,
+    /// The drive's speed reading's lag it measured, s, as of the last drive reading.
+    speed_lag_s: f32,
     /// The drive's torque lag, measured on its torque readings against the references sent
     /// (the readings taken on the loops' control ticks), and [`VfdStatus::reads_ok`] at the
     /// last reading it took.
@@ -642,6 +644,7 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             drive_lag: DriveLagProbe::new(),
             drive_lag_reads: 0,
             inertia_factor: 1.0,
+            speed_lag_s: 0.0,
             torque_sum: 0.0,
             torque_ticks: 0,
             vfd_reads_seen: 0,
@@ -734,6 +737,12 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
     /// ([`model_core::drive_lag::DriveLagProbe::lag_s`]: 0 until the torque has moved).
     pub fn drive_lag_s(&self) -> f32 {
         self.drive_lag.lag_s()
+    }
+
+    /// The drive's speed reading's lag measured with the inertia, s
+    /// ([`model_core::inertia::InertiaProbe::speed_lag_s`]: 0 until a move has shown one).
+    pub fn speed_lag_s(&self) -> f32 {
+        self.speed_lag_s
     }
 
     /// What the SCADA registers hold now.
@@ -995,7 +1004,7 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
                     .read(d.torque_pct, &self.whitebox.params().gamma);
             }
         }
-        r.set_drive_lag(self.drive_lag.lag_s());
+        r.set_drive_lag(self.drive_lag.lag_s(), self.speed_lag_s);
         // The cap keeps the pump out of the overspeed trip: none where overspeed only warns
         // (holding register 6; a review: it cost 10.6 % of the pressure there for nothing).
         let p = &inp.commands.protection;
@@ -1052,7 +1061,7 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             // valve steps read 1.03..1.12 × on the paper's rotor).
             let learn = d.turning && self.regulator.as_ref().is_none_or(Regulator::moving);
             self.inertia.update(learn, d.moved, d.predicted_rpm_per_s);
-            self.inertia_factor = self.inertia.factor();
+            (self.inertia_factor, self.speed_lag_s) = self.inertia.measured();
             self.monitor.set_inertia(self.inertia_factor);
         }
         self.view = LoopView {

@@ -161,7 +161,7 @@ pub struct ControlArgs {
     #[arg(long, conflicts_with_all = [
         "scenario", "controller", "targets", "output", "plot", "set", "seed", "hold_s",
         "flow_lag_ms", "curve_error", "curve_shape", "water_inertia", "drive_lag_ms", "rotor_inertia",
-        "pressure_lag_ms",
+        "pressure_lag_ms", "speed_lag_ms",
     ])]
     pub plant_stdio: bool,
     /// The law(s) to run.
@@ -549,6 +549,15 @@ pub struct PlantArgs {
         allow_hyphen_values = true
     )]
     pub pressure_lag_ms: String,
+    /// First-order lag of the drive's speed reading, ms (0..2000; 0: none): a drive's
+    /// filtered speed estimate, read over its link, lags the rotor.
+    #[arg(
+        long,
+        value_name = "MS",
+        default_value = "0",
+        allow_hyphen_values = true
+    )]
+    pub speed_lag_ms: String,
 }
 
 /// A value parser: a finite number > 0.

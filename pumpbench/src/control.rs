@@ -540,6 +540,9 @@ pub struct Trace {
     /// The drive's torque lag the controller measured by the run's end, s
     /// (`Controller::drive_lag_s`; 0 until measured).
     pub drive_lag_s: f32,
+    /// The drive's speed reading's lag the controller measured by the run's end, s
+    /// (`Controller::speed_lag_s`; 0 until measured).
+    pub speed_lag_s: f32,
     /// The time a protection held the torque at 0 % (status bit 7), s.
     pub tripped_s: f64,
 }
@@ -685,6 +688,7 @@ pub fn run(
         measured_lag_s: [0.0; 2],
         inertia_factor: 1.0,
         drive_lag_s: 0.0,
+        speed_lag_s: 0.0,
         tripped_s: 0.0,
     };
     let mut last_torque: Option<f32> = None;
@@ -766,6 +770,7 @@ pub fn run(
         }
         trace.inertia_factor = c.inertia_factor();
         trace.drive_lag_s = c.drive_lag_s();
+        trace.speed_lag_s = c.speed_lag_s();
         plant.apply(&reply)?;
         trace.samples.push(Sample {
             t_s: t as f64 * 1e-3,
@@ -1140,7 +1145,8 @@ pub fn report(
             s,
             "{}: torque NaN steps {}, outside its limits {}, largest change into a period with \
              the link up {:.1} %/s; measured plant lag: pressure {:.0} ms, flow {:.0} ms; \
-             rotor inertia measured: {:.2} × the paper's; drive lag measured: {:.0} ms; tripped \
+             rotor inertia measured: {:.2} × the paper's; drive lag measured: {:.0} ms; speed \
+             reading lag measured: {:.0} ms; tripped \
              (a protection's 0 %) {:.3} s",
             trace.law.name(),
             trace.nan_steps,
@@ -1150,6 +1156,7 @@ pub fn report(
             trace.measured_lag_s[1] * 1000.0,
             trace.inertia_factor,
             trace.drive_lag_s * 1000.0,
+            trace.speed_lag_s * 1000.0,
             trace.tripped_s
         );
     }
@@ -1477,7 +1484,7 @@ pub fn command(a: ControlArgs) -> Result<(), Failure> {
     bar.finish_and_clear();
     let plant_text = format!(
         "plant: curve error {},{} %, curve shape {},{} %, rotor inertia {} × the paper's, water inertia {} mca·s²/l, \
-         drive lag {} ms, pressure lag {} ms, flow lag {} ms, seed {}",
+         drive lag {} ms, pressure lag {} ms, flow lag {} ms, speed reading lag {} ms, seed {}",
         // (+ 0.0: a curve error of 0 is written 0, not -0.)
         Short(o.curve_error.head_pct + 0.0),
         Short(o.curve_error.torque_pct + 0.0),
@@ -1488,6 +1495,7 @@ pub fn command(a: ControlArgs) -> Result<(), Failure> {
         Short(o.dynamics.drive_lag_s * 1000.0),
         Short(o.pressure_lag_s * 1000.0),
         Short(o.flow_lag_s * 1000.0),
+        Short(o.speed_lag_s * 1000.0),
         o.seed
     );
     if let Some(out) = &a.output {

@@ -421,6 +421,9 @@ pub struct PlantOptions {
     pub flow_lag_s: f64,
     /// Pressure transmitter lag, s.
     pub pressure_lag_s: f64,
+    /// The drive's speed reading's first-order lag, s (0: the rotor's speed as it is; a
+    /// drive's filtered speed estimate lags it).
+    pub speed_lag_s: f64,
 }
 
 impl PlantOptions {
@@ -434,6 +437,7 @@ impl PlantOptions {
             rotor_inertia: 1.0,
             flow_lag_s: FLOW.tau_s,
             pressure_lag_s: PRESSURE.tau_s,
+            speed_lag_s: SPEED.tau_s,
         }
     }
 }
@@ -508,6 +512,7 @@ pub struct Plant {
     dynamics: Dynamics,
     pressure: Transmitter,
     flow: Transmitter,
+    speed: Transmitter,
     /// The transmitters' lagged values: speed, flow, pressure.
     seen: (f64, f64, f64),
     rng: SplitMix64,
@@ -540,6 +545,10 @@ impl Plant {
             flow: Transmitter {
                 tau_s: o.flow_lag_s,
                 ..FLOW
+            },
+            speed: Transmitter {
+                tau_s: o.speed_lag_s,
+                ..SPEED
             },
             seen: (0.0, 0.0, 0.0),
             rng: SplitMix64::new(o.seed),
@@ -623,7 +632,7 @@ impl Plant {
         let (s, q, p) = &mut self.seen;
         self.pressure.lag(p, p_now, h_s);
         self.flow.lag(q, q_now, h_s);
-        SPEED.lag(s, w_now, h_s);
+        self.speed.lag(s, w_now, h_s);
         Ok(())
     }
 
@@ -633,7 +642,7 @@ impl Plant {
     pub fn readings(&mut self) -> (f64, f64, f64) {
         let (s, q, p) = self.seen;
         (
-            SPEED.read(s, &mut self.rng),
+            self.speed.read(s, &mut self.rng),
             self.flow.read(q, &mut self.rng),
             self.pressure.read(p, &mut self.rng),
         )
@@ -646,7 +655,7 @@ impl Plant {
     /// as [`Self::readings`], whatever the sensors' state.
     pub fn frame(&mut self) -> PlantFrame {
         let (s, q, p) = self.seen;
-        let speed = SPEED.noisy(s, &mut self.rng);
+        let speed = self.speed.noisy(s, &mut self.rng);
         let flow = self.flow.noisy(q, &mut self.rng);
         let pressure = self.pressure.noisy(p, &mut self.rng);
         let code = |l: &LoopConfig, ok: bool, v: f64| {
@@ -943,6 +952,43 @@ mod tests {
         assert!((frac - (1.0 - (-1.0f64).exp())).abs() < 1e-9, "{frac}");
         let d = p.frame().drive.unwrap();
         assert_eq!(d.torque_pct, p.truth().torque_pct as f32);
+    }
+
+    /// With a speed reading lag the drive's speed reading follows a speed step through it:
+    /// 63 % of the way after one time constant (noise aside); without, the speed as it is.
+    #[test]
+    fn the_speed_reading_follows_its_lag() {
+        for lag in [0.0, 0.05] {
+            let o = PlantOptions {
+                speed_lag_s: lag,
+                ..PlantOptions::with_seed(1)
+            };
+            let mut p = Plant::new(&o, 1.0, 30.0).unwrap();
+            let w0 = p.truth().speed_rpm;
+            let mut seen = vec![];
+            for _ in 0..50 {
+                p.advance(90.0, 1e-3).unwrap();
+                seen.push(p.truth().speed_rpm);
+            }
+            // The lag integrated over the true speed's path, as the plant steps it.
+            let mut want = w0;
+            for w in &seen {
+                want += (w - want)
+                    * if lag > 0.0 {
+                        1.0 - (-1e-3 / lag).exp()
+                    } else {
+                        1.0
+                    };
+            }
+            let got = f64::from(p.frame().drive.unwrap().speed_rpm);
+            // Within the speed channel's noise (a sum of four uniform draws: ≤ 4 × 0.5 × √3).
+            assert!((got - want).abs() < 3.5, "lag {lag}: {got} vs {want}");
+            let rise = p.truth().speed_rpm - w0;
+            assert!(rise > 100.0, "{rise}");
+            if lag > 0.0 {
+                assert!(want < p.truth().speed_rpm - 0.2 * rise, "{want}");
+            }
+        }
     }
 
     /// A rotor of `f` × the paper's inertia: the same steady state, and the speed's first

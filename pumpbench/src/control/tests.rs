@@ -142,6 +142,7 @@ fn trace_of(samples: &[(f64, usize, u16, f64, f64)]) -> Trace {
         measured_lag_s: [0.0; 2],
         inertia_factor: 1.0,
         drive_lag_s: 0.0,
+        speed_lag_s: 0.0,
         tripped_s: 0.0,
     }
 }
