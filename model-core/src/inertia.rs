@@ -258,63 +258,41 @@ mod tests {
     use super::*;
     use crate::excitation::SplitMix64;
 
-    /// A rotor of `factor` × the paper's inertia driven by a square-wave surplus, read every
-    /// 10 ms with ±0.5 rpm of noise: the probe after `readings`.
-    fn measured(factor: f32, readings: u32) -> InertiaProbe<f32> {
-        let accel = 100.0;
-        let mut p = InertiaProbe::new();
-        let mut rng = SplitMix64::new(3);
-        let mut w = 1000.0f32;
-        let mut last = None;
-        // +10 % for 0.3 s, −10 % for 0.3 s, ..., the torque ramping between readings.
-        let surplus = |k: u32| {
-            if (k / 30).is_multiple_of(2) {
-                10.0
-            } else {
-                -10.0
-            }
-        };
-        for k in 0..readings {
-            let read = w + rng.uniform(-0.5, 0.5) as f32;
-            p.update(
-                true,
-                last.map_or((0.0, 0.0), |w0| (read - w0, 0.01)),
-                accel * surplus(k),
-            );
-            last = Some(read);
-            w += accel / factor * 0.5 * (surplus(k) + surplus(k + 1)) * 0.01;
-        }
-        p
-    }
-
-    /// As [`measured`], read every 50 ms (as the controller takes its readings, with each
-    /// observer step) with ±10 % for 0.5 s, −10 % for 0.5 s, ..., the speed read through a
-    /// first-order lag of `lag_s` (the rotor's speed integrated in steps of 1 ms, the
-    /// reading's lag exactly over each).
-    fn measured_lagged(factor: f32, lag_s: f32, readings: u32) -> InertiaProbe<f32> {
+    /// A rotor of `factor` × the paper's inertia driven by a square-wave surplus (±10 % for
+    /// `half` readings each, ramping between readings), read every `every_s` with ±0.5 rpm of
+    /// noise through a first-order lag of `lag_s` (the rotor's speed integrated in steps of
+    /// 1 ms, the lag exactly over each): the probe after `readings`.
+    fn driven(
+        factor: f32,
+        lag_s: f32,
+        every_s: f32,
+        half: u32,
+        readings: u32,
+    ) -> InertiaProbe<f32> {
         let accel = 100.0;
         let mut p = InertiaProbe::new();
         let mut rng = SplitMix64::new(3);
         let (mut w, mut seen) = (1000.0f32, 1000.0f32);
         let mut last = None;
         let surplus = |k: u32| {
-            if (k / 10).is_multiple_of(2) {
+            if (k / half).is_multiple_of(2) {
                 10.0
             } else {
                 -10.0
             }
         };
+        let steps = (every_s * 1e3).round() as u32;
         for k in 0..readings {
             let read = seen + rng.uniform(-0.5, 0.5) as f32;
             p.update(
                 true,
-                last.map_or((0.0, 0.0), |w0| (read - w0, 0.05)),
+                last.map_or((0.0, 0.0), |w0| (read - w0, every_s)),
                 accel * surplus(k),
             );
             last = Some(read);
-            // The surplus ramps over the interval; 50 steps of 1 ms.
-            for j in 0..50 {
-                let s = surplus(k) + (surplus(k + 1) - surplus(k)) * (j as f32 + 0.5) / 50.0;
+            for j in 0..steps {
+                let s =
+                    surplus(k) + (surplus(k + 1) - surplus(k)) * (j as f32 + 0.5) / steps as f32;
                 w += accel / factor * s * 1e-3;
                 seen += (w - seen)
                     * if lag_s > 0.0 {
@@ -325,6 +303,17 @@ mod tests {
             }
         }
         p
+    }
+
+    /// Read every 10 ms, the speed as it is, 0.3 s each way.
+    fn measured(factor: f32, readings: u32) -> InertiaProbe<f32> {
+        driven(factor, 0.0, 0.01, 30, readings)
+    }
+
+    /// Read every 50 ms (as the controller takes its readings, with each observer step)
+    /// through a lag of `lag_s`, 0.5 s each way.
+    fn measured_lagged(factor: f32, lag_s: f32, readings: u32) -> InertiaProbe<f32> {
+        driven(factor, lag_s, 0.05, 10, readings)
     }
 
     /// A speed read through a lag: the lag measured, the inertia nearer than the ratio
