@@ -110,8 +110,8 @@ impl<T: Real> InertiaProbe<T> {
     /// speed as it is, a torque curve off in shape by −24 %: 0.25 × and 300 ms at 0.06 after
     /// its first move, then 32 ms at 0.06 and 15 ms at 0.03); with a lag they part (0.09..0.19
     /// at 50 and 100 ms). Over six sets of 200 random plants without a lag, 0.05 changed 26
-    /// pressure-step runs (10 figure targets fewer), 0.075 one (4 comparisons fewer), 0.1
-    /// one (1); with every speed read through 50 ms (set 3): 6 995, 6 954, 6 896 targets of
+    /// pressure-step runs (10 figure targets fewer), 0.075 six (the targets the same, 4
+    /// comparisons fewer), 0.1 one (1 comparison fewer); with every speed read through 50 ms (set 3): 6 995, 6 954, 6 896 targets of
     /// 7 600 (6 828 without the measurement), through 100 ms 6 804, 6 741, 6 706 (6 524).
     pub const LAG_MIN_SPREAD: f64 = 0.075;
     /// The longest speed reading's lag reported, s: a drive's speed filter of 0.5 s (some
