@@ -776,8 +776,8 @@ impl Regulator {
     /// ([`BRAKE_DEAD_TIME_S`]) waits both longer, for the torque to follow and for the
     /// speed read to show the rotor's; the speed guard ([`GUARD_DEAD_TIME_S`]) the speed
     /// reading's. (With a 100 ms speed reading the braking came late: on 200 random plants
-    /// 268 of 400 upward pressure steps overshot 5 %, 34 with the speed as it is; 121 with
-    /// the lag measured and waited for, docs/control.md.) Not a number, or negative: 0.
+    /// 268 of 400 upward pressure steps overshot 5 %, 34 with the speed as it is; 165 with
+    /// the lag measured and waited for: the first move runs before it is; docs/control.md.) Not a number, or negative: 0.
     pub fn set_drive_lag(&mut self, lag_s: f32, speed_lag_s: f32) {
         let speed = if speed_lag_s > 0.0 { speed_lag_s } else { 0.0 };
         self.drive_lag_s = if lag_s > 0.0 { lag_s + speed } else { speed };
