@@ -777,7 +777,8 @@ impl Regulator {
     /// speed read to show the rotor's; the speed guard ([`GUARD_DEAD_TIME_S`]) the speed
     /// reading's. (With a 100 ms speed reading the braking came late: on 200 random plants
     /// 268 of 400 upward pressure steps overshot 5 %, 34 with the speed as it is; 165 with
-    /// the lag measured and waited for: the first move runs before it is; docs/control.md.) Not a number, or negative: 0.
+    /// the lag measured and waited for: the first move runs before it is; docs/control.md.)
+    /// Not a number, or negative: 0.
     pub fn set_drive_lag(&mut self, lag_s: f32, speed_lag_s: f32) {
         let speed = if speed_lag_s > 0.0 { speed_lag_s } else { 0.0 };
         self.drive_lag_s = if lag_s > 0.0 { lag_s + speed } else { speed };
@@ -1620,6 +1621,25 @@ mod tests {
         }
     }
 
+    /// One period of `reg` toward `setpoint` with the reading at `at`, and with it `d` lower
+    /// (the error's rate 0: the ring watch's smoothing at it): the proportional part's response
+    /// per unit of error, the torque's less the integral's.
+    fn proportional_slope(
+        reg: &Regulator,
+        (p, load, s): (&BenchParams<f32>, Load<f32>, &ControlSettings),
+        setpoint: f32,
+        at: f32,
+        d: f32,
+    ) -> f32 {
+        let (mut a, mut b) = (*reg, *reg);
+        b.ring_e = d;
+        let (a, b) = (
+            a.step(p, load, s, setpoint, at),
+            b.step(p, load, s, setpoint, at - d),
+        );
+        ((b.torque_pct - a.torque_pct) - (b.integral_pct - a.integral_pct)) / d
+    }
+
     /// [`PI_PRESSURE`] and [`PI_FLOW`] are the IMC rule at their operating points.
     #[test]
     fn the_fixed_gains_are_the_imc_rule_at_one_point() {
@@ -2241,16 +2261,7 @@ mod tests {
         for _ in 0..400 {
             reg.step(&p, load, &s, at, at);
         }
-        // The proportional part's response to an error of d held (its rate 0).
-        let slope = |d: f32| {
-            let (mut a, mut b) = (reg, reg);
-            b.ring_e = d;
-            let (a, b) = (
-                a.step(&p, load, &s, at, at),
-                b.step(&p, load, &s, at, at - d),
-            );
-            ((b.torque_pct - a.torque_pct) - (b.integral_pct - a.integral_pct)) / d
-        };
+        let slope = |d: f32| proportional_slope(&reg, (&p, load, &s), at, at, d);
         let base = slope(0.01 * band);
         for (x, rise) in [
             (0.05, 0.0),
@@ -2293,13 +2304,7 @@ mod tests {
         // The proportional part's response to a small error (x = 0.01 of the rise).
         let d = 0.01 * MOVING_FRACTION * 3.0;
         let slope = |reg: &Regulator, setpoint: f32| {
-            let (mut a, mut b) = (*reg, *reg);
-            b.ring_e = d;
-            let (a, b) = (
-                a.step(&p, load, &s, setpoint, 3.0),
-                b.step(&p, load, &s, setpoint, 3.0 - d),
-            );
-            ((b.torque_pct - a.torque_pct) - (b.integral_pct - a.integral_pct)) / d
+            proportional_slope(reg, (&p, load, &s), setpoint, 3.0, d)
         };
         let between = slope(&reg, 3.0);
         let rise = 1.0 + (1.0 / REGULATION_LAMBDA_FRACTION - 1.0) * 0.01;

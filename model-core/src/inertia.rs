@@ -41,8 +41,9 @@
 //! small ([`InertiaProbe::LAG_MIN_C`]) or `p` and `x` too alike
 //! ([`InertiaProbe::LAG_MIN_SPREAD`]: a model's error then reads as a lag), or where the fit
 //! reads the rotor heavier than the ratio (a lag only reads the ratio heavier: that is a
-//! model's error too, a dry pump's coast), the ratio stands and no lag is read. The ratio reads a rotor behind a lagging reading heavier: 1.47 × on
-//! the paper's rotor at 100 ms, the pair 1.21 ×.
+//! model's error too, a dry pump's coast), the ratio stands and no lag is read. The ratio
+//! reads a rotor behind a lagging reading heavier: 1.47 × on the paper's rotor at 100 ms,
+//! the pair 1.21 ×.
 //! Measured through `pumpbench control --speed-lag-ms` (P0, P4 of docs/control.md, J × 2
 //! behind a 20 ms drive, J × 0.5 with a 0.1 mca·s²/l water column; one scenario's pressure
 //! or flow steps): 0 ms read 0; 20 ms 0..14 (under [`InertiaProbe::LAG_MIN_C`] mostly);
@@ -111,8 +112,9 @@ impl<T: Real> InertiaProbe<T> {
     /// its first move, then 32 ms at 0.06 and 15 ms at 0.03); with a lag they part (0.09..0.19
     /// at 50 and 100 ms). Over six sets of 200 random plants without a lag, 0.05 changed 26
     /// pressure-step runs (10 figure targets fewer), 0.075 six (the targets the same, 4
-    /// comparisons fewer), 0.1 one (1 comparison fewer); with every speed read through 50 ms (set 3): 6 995, 6 954, 6 896 targets of
-    /// 7 600 (6 828 without the measurement), through 100 ms 6 804, 6 741, 6 706 (6 524).
+    /// comparisons fewer), 0.1 one (1 comparison fewer); with every speed read through
+    /// 50 ms (set 3): 6 995, 6 954, 6 896 targets of 7 600 (6 828 without the measurement),
+    /// through 100 ms 6 804, 6 741, 6 706 (6 524).
     pub const LAG_MIN_SPREAD: f64 = 0.075;
     /// The longest speed reading's lag reported, s: a drive's speed filter of 0.5 s (some
     /// ship with it) reads as this; beyond, the loops' braking would only start earlier.
@@ -138,9 +140,8 @@ impl<T: Real> InertiaProbe<T> {
 
     /// The rotor's inertia as a factor of the paper's within [`InertiaProbe::RANGE`]: with a
     /// speed reading's lag measured, `(1 − c) / d` of the pairs' fit (module docs), else
-    /// `Σ x² / Σ x y`; 1
-    /// until the sums hold [`InertiaProbe::EVIDENCE_RPM2`] with a squared correlation of
-    /// [`InertiaProbe::MIN_R2`] (computed here, not on every reading).
+    /// `Σ x² / Σ x y`; 1 until the sums hold [`InertiaProbe::EVIDENCE_RPM2`] with a squared
+    /// correlation of [`InertiaProbe::MIN_R2`] (computed here, not on every reading).
     pub fn factor(&self) -> T {
         self.measured().0
     }
