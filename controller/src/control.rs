@@ -639,7 +639,11 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             adapt_alarm: 0,
             follow_due: false,
             observer,
-            monitor: Monitor::new(MonitorConfig::paper()),
+            monitor: {
+                let mut m = Monitor::new(MonitorConfig::paper());
+                m.set_inertia(None);
+                m
+            },
             inertia: InertiaProbe::new(),
             drive_lag: DriveLagProbe::new(),
             drive_lag_reads: 0,
@@ -1062,7 +1066,11 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             let learn = d.turning && self.regulator.as_ref().is_none_or(Regulator::moving);
             self.inertia.update(learn, d.moved, d.predicted_rpm_per_s);
             (self.inertia_factor, self.speed_lag_s) = self.inertia.measured();
-            self.monitor.set_inertia(self.inertia_factor);
+            // Before the probe holds its evidence the dry-run rule reads a coast on the
+            // heaviest rotor (`Monitor::set_inertia`).
+            let known = self.inertia.evidence_rpm2() >= InertiaProbe::<f32>::EVIDENCE_RPM2 as f32;
+            self.monitor
+                .set_inertia(known.then_some(self.inertia_factor));
         }
         self.view = LoopView {
             load: Load {

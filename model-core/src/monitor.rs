@@ -249,6 +249,9 @@ pub struct Monitor<T> {
     /// The same for the rotor's inertia as measured ([`Self::set_inertia`]): the dry-run
     /// rule's.
     rotor_accel: T,
+    /// The dry-run rule's while the speed falls: [`Self::set_inertia`]'s, or with the inertia
+    /// not measured yet the heaviest rotor the probe reports.
+    coast_accel: T,
     gamma: [T; 6],
     beta: [T; 10],
 }
@@ -269,6 +272,7 @@ impl<T: Real> Monitor<T> {
             motion: None,
             accel: par.accel_rpm_per_s_per_pct(),
             rotor_accel: par.accel_rpm_per_s_per_pct(),
+            coast_accel: par.accel_rpm_per_s_per_pct(),
             gamma: par.gamma,
             beta: par.beta,
         }
@@ -294,15 +298,26 @@ impl<T: Real> Monitor<T> {
     /// the paper's.
     /// A dry pump at a steady speed shows its (small) load whatever the inertia: the factor
     /// moves only what accelerations read.
-    pub fn set_inertia(&mut self, factor: T) {
+    ///
+    /// `None`: not measured yet (the probe lacks its evidence). A falling speed is then read
+    /// on a rotor of the probe's largest factor (4 × the paper's), the inertia that shows the
+    /// most load: a rotor heavier than the paper's coasting at low torque before any move had
+    /// taught the probe (a PI alone with a slow λ, registers 16 and 18, moves too gently to
+    /// teach it) read dry and tripped. The price: before the inertia is measured a dry pump
+    /// is judged at a steady or rising speed only. (The monitor starts with the paper's J,
+    /// as `Some(1)`: its other users have no probe.)
+    pub fn set_inertia(&mut self, factor: Option<T>) {
         // Heavier only: a lighter rotor with the paper's J shows more load on a coast, not
         // less, and a torque reading that lags (a drive's filter) reads the inertia low (at
         // 200 ms, 0.39 × on the paper's rotor: taken, every coast would read dry).
         let hi = T::from_f64(InertiaProbe::<T>::RANGE.1);
-        self.rotor_accel = if factor > T::ONE && factor <= hi {
-            self.accel / factor
-        } else {
-            self.accel
+        self.rotor_accel = match factor {
+            Some(f) if f > T::ONE && f <= hi => self.accel / f,
+            _ => self.accel,
+        };
+        self.coast_accel = match factor {
+            Some(_) => self.rotor_accel,
+            None => self.accel / hi,
         };
     }
 
@@ -421,7 +436,12 @@ impl<T: Real> Monitor<T> {
             Some(t) if t.is_finite() => t,
             _ => electromagnetic_torque_pct(&self.gamma, applied_torque_pct(m.torque_ref_pct)),
         };
-        let shown = load_torque_from_motion_pct(delivered, rate, self.rotor_accel);
+        let rotor = if rate < T::ZERO {
+            self.coast_accel
+        } else {
+            self.rotor_accel
+        };
+        let shown = load_torque_from_motion_pct(delivered, rate, rotor);
         let needed = load_torque_pct(&self.beta, speed, flow);
         let fast = speed > c.min_speed_rpm && needed > T::ZERO;
         let ratio = if fast { shown / needed } else { T::ONE };
@@ -855,13 +875,14 @@ mod tests {
     /// A rotor four times the paper's coasting at 0 % torque: its speed falls at a quarter of
     /// the rate the paper's J gives its load. With the paper's J the motion shows a quarter of
     /// the load and the dry-run alarm rises after its 2 s; told the inertia
-    /// ([`Monitor::set_inertia`]) it shows the whole load and stays quiet. A factor of 1 or
-    /// less, above the probe's range or not a number is the paper's J.
+    /// ([`Monitor::set_inertia`]) it shows the whole load and stays quiet, and so it does with
+    /// the inertia not measured yet (`None`: a coast is read on the heaviest rotor). A factor
+    /// of 1 or less, above the probe's range or not a number is the paper's J.
     #[test]
     fn the_dry_run_rule_takes_the_inertia_measured() {
         let o = Observer::<f64>::new(ObserverConfig::paper(), 50.0).unwrap();
         let e = o.estimate_now();
-        let coast = |factor: f64| {
+        let coast = |factor: Option<f64>| {
             let mut mon = Monitor::new(MonitorConfig::<f64>::paper());
             mon.set_inertia(factor);
             let mut w = 1500.0;
@@ -884,9 +905,10 @@ mod tests {
             assert!(w > 600.0, "still turning above the rule's minimum: {w}");
             bits & DRY_RUN
         };
-        assert_eq!(coast(4.0), 0, "told the inertia");
+        assert_eq!(coast(Some(4.0)), 0, "told the inertia");
+        assert_eq!(coast(None), 0, "not measured yet");
         for paper in [1.0, 0.5, f64::NAN, 0.1, 5.0] {
-            assert_eq!(coast(paper), DRY_RUN, "{paper}");
+            assert_eq!(coast(Some(paper)), DRY_RUN, "{paper}");
         }
     }
 

@@ -388,6 +388,12 @@ fn a_lagging_speed_reading_is_measured_and_waited_for() {
 /// for seconds: with the paper's J in the dry-run rule the motion showed a quarter of the load
 /// and tripped dry run (latched) at 10.3 s; with the J measured on the first step, no trip
 /// under either law.
+///
+/// And before the inertia is measured: a flow loop commissioned slow (registers 16 and 18),
+/// whose PI alone moves too gently to teach the probe, coasted a rotor of 3.6 × the paper's
+/// from 15 to 8 l/s; on the paper's J the PI alone tripped dry run at 29.2 s (a review's
+/// plant of another make the same, at 9.3 s). The rule now reads a coast on the heaviest
+/// rotor until the probe holds its evidence.
 #[test]
 fn a_heavy_rotor_coasting_is_not_a_dry_pump() {
     let out = pumpbench(&[
@@ -398,6 +404,24 @@ fn a_heavy_rotor_coasting_is_not_a_dry_pump() {
         "4",
     ]);
     let stdout = ok(&out, "control");
+    assert_neither_law_tripped(&stdout);
+    let out = pumpbench(&[
+        "control",
+        "--scenario",
+        "flow-steps",
+        "--rotor-inertia",
+        "3.6",
+        "--set",
+        "16=400",
+        "--set",
+        "18=600",
+    ]);
+    let stdout = ok(&out, "control");
+    let pi = stdout
+        .lines()
+        .find(|l| l.starts_with("pi: torque"))
+        .unwrap();
+    assert!(pi.contains("rotor inertia measured: 1.00 "), "{pi}");
     assert_neither_law_tripped(&stdout);
 }
 
