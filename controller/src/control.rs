@@ -1063,14 +1063,17 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             // In the loops, only the moves they make teach the inertia: a valve step's new
             // load torque shows in the flow reading late (a first version that learnt from
             // valve steps read 1.03..1.12 × on the paper's rotor).
-            let learn = d.turning && self.regulator.as_ref().is_none_or(Regulator::moving);
+            // Nor while a protection holds 0 %: a dry pump's coast (its load not the
+            // curve's) read 4 × the paper's rotor within 1 s, and the dry-run rule, told it,
+            // took 13..18 s to rise instead of 2 (a review, on the virtual board).
+            let learn =
+                d.turning && !self.hold && self.regulator.as_ref().is_none_or(Regulator::moving);
             self.inertia.update(learn, d.moved, d.predicted_rpm_per_s);
-            (self.inertia_factor, self.speed_lag_s) = self.inertia.measured();
-            // Before the probe holds its evidence the dry-run rule reads a coast on the
-            // heaviest rotor (`Monitor::set_inertia`).
-            let known = self.inertia.evidence_rpm2() >= InertiaProbe::<f32>::EVIDENCE_RPM2 as f32;
-            self.monitor
-                .set_inertia(known.then_some(self.inertia_factor));
+            let (factor, lag) = self.inertia.measured();
+            (self.inertia_factor, self.speed_lag_s) = (factor.unwrap_or(1.0), lag);
+            // Until the probe has measured, the dry-run rule reads a coast on the heaviest
+            // rotor (`Monitor::set_inertia`).
+            self.monitor.set_inertia(factor);
         }
         self.view = LoopView {
             load: Load {

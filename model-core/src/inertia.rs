@@ -143,7 +143,7 @@ impl<T: Real> InertiaProbe<T> {
     /// `Σ x² / Σ x y`; 1 until the sums hold [`InertiaProbe::EVIDENCE_RPM2`] with a squared
     /// correlation of [`InertiaProbe::MIN_R2`] (computed here, not on every reading).
     pub fn factor(&self) -> T {
-        self.measured().0
+        self.measured().0.unwrap_or(T::ONE)
     }
 
     /// The speed reading's first-order lag, s (module docs): `dt c / (1 − c)` at the pairs'
@@ -154,8 +154,10 @@ impl<T: Real> InertiaProbe<T> {
     }
 
     /// [`InertiaProbe::factor`] and [`InertiaProbe::speed_lag_s`] from one fit (the
-    /// controller takes both with each drive reading, on the observer's tick: its longest).
-    pub fn measured(&self) -> (T, T) {
+    /// controller takes both with each drive reading, on the observer's tick: its longest);
+    /// the factor `None` while it is not a measurement (the evidence or the correlation
+    /// short: [`InertiaProbe::factor`] then reads 1, the paper's).
+    pub fn measured(&self) -> (Option<T>, T) {
         let range = |f: T| {
             f.max(T::from_f64(Self::RANGE.0))
                 .min(T::from_f64(Self::RANGE.1))
@@ -169,17 +171,13 @@ impl<T: Real> InertiaProbe<T> {
             let f = (T::ONE - c) / d;
             if sxy > T::ZERO && f * sxy <= sxx {
                 let lag = self.pairs[6] / self.pairs[7] * c / (T::ONE - c);
-                return (range(f), lag.min(T::from_f64(Self::MAX_SPEED_LAG_S)));
+                return (Some(range(f)), lag.min(T::from_f64(Self::MAX_SPEED_LAG_S)));
             }
         }
-        let f = if sxx >= T::from_f64(Self::EVIDENCE_RPM2)
+        let f = (sxx >= T::from_f64(Self::EVIDENCE_RPM2)
             && sxy > T::ZERO
-            && sxy * sxy >= T::from_f64(Self::MIN_R2) * sxx * syy
-        {
-            range(sxx / sxy)
-        } else {
-            T::ONE
-        };
+            && sxy * sxy >= T::from_f64(Self::MIN_R2) * sxx * syy)
+            .then(|| range(sxx / sxy));
         (f, T::ZERO)
     }
 

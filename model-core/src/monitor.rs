@@ -299,13 +299,15 @@ impl<T: Real> Monitor<T> {
     /// A dry pump at a steady speed shows its (small) load whatever the inertia: the factor
     /// moves only what accelerations read.
     ///
-    /// `None`: not measured yet (the probe lacks its evidence). A falling speed is then read
-    /// on a rotor of the probe's largest factor (4 × the paper's), the inertia that shows the
-    /// most load: a rotor heavier than the paper's coasting at low torque before any move had
+    /// `None`: not measured yet ([`crate::inertia::InertiaProbe::measured`]). A falling speed
+    /// (by more than the fall [`crate::inertia::InertiaProbe::MIN_SURPLUS_PCT`] of torque gives
+    /// that rotor: 54 rpm/s at the paper's J, over the reading's noise) is then read on a
+    /// rotor of the probe's largest factor (4 × the paper's), the inertia that shows the most
+    /// load: a rotor heavier than the paper's coasting at low torque before any move had
     /// taught the probe (a PI alone with a slow λ, registers 16 and 18, moves too gently to
     /// teach it) read dry and tripped. The price: before the inertia is measured a dry pump
-    /// is judged at a steady or rising speed only. (The monitor starts with the paper's J,
-    /// as `Some(1)`: its other users have no probe.)
+    /// is judged at a steady, slowly falling or rising speed only. (The monitor starts with
+    /// the paper's J, as `Some(1)`: its other users have no probe.)
     pub fn set_inertia(&mut self, factor: Option<T>) {
         // Heavier only: a lighter rotor with the paper's J shows more load on a coast, not
         // less, and a torque reading that lags (a drive's filter) reads the inertia low (at
@@ -436,7 +438,10 @@ impl<T: Real> Monitor<T> {
             Some(t) if t.is_finite() => t,
             _ => electromagnetic_torque_pct(&self.gamma, applied_torque_pct(m.torque_ref_pct)),
         };
-        let rotor = if rate < T::ZERO {
+        // A fall that shows at least `MIN_SURPLUS_PCT` of torque on the heaviest rotor (54
+        // rpm/s at the paper's J): not the reading's noise at a steady speed (±13 rpm/s).
+        let coasting = rate < -T::from_f64(InertiaProbe::<T>::MIN_SURPLUS_PCT) * self.coast_accel;
+        let rotor = if coasting {
             self.coast_accel
         } else {
             self.rotor_accel
