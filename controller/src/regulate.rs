@@ -2897,13 +2897,13 @@ mod tests {
 
     /// [`ring`], and the time the watch first raised the loop's lag, ms (`None`: never).
     fn ring_watched(pressure_mca: f32, delay_ms: usize, watch: bool) -> (f32, f32, Option<u32>) {
-        ring_near_cap(pressure_mca, delay_ms, watch, None, 100.0)
+        ring_limited(pressure_mca, delay_ms, watch, None, 100.0)
     }
 
-    /// [`ring_watched`] with the overspeed limit at `cap_factor` × the speed that holds the
-    /// setpoint over [`SPEED_LIMIT_FRACTION`] (the speed cap at that factor; `None`: no limit)
-    /// and the torque's high limit at `max_pct`.
-    fn ring_near_cap(
+    /// [`ring_watched`] within limits: the overspeed limit at `cap_factor` × the speed that
+    /// holds the setpoint over [`SPEED_LIMIT_FRACTION`] (the speed cap at that factor; `None`:
+    /// no limit) and the torque's high limit at `max_pct`.
+    fn ring_limited(
         pressure_mca: f32,
         delay_ms: usize,
         watch: bool,
@@ -3000,9 +3000,9 @@ mod tests {
     #[test]
     fn a_ring_near_the_speed_cap_is_watched_too() {
         for f in [1.02f32, 1.1, 1.15] {
-            let (swing, lag, _) = ring_near_cap(3.0, 250, false, Some(f), 100.0);
+            let (swing, lag, _) = ring_limited(3.0, 250, false, Some(f), 100.0);
             assert!(swing > 1.0 && lag == 0.0, "cap × {f}: {swing} mca, {lag} s");
-            let (swing, lag, acted) = ring_near_cap(3.0, 250, true, Some(f), 100.0);
+            let (swing, lag, acted) = ring_limited(3.0, 250, true, Some(f), 100.0);
             assert!(
                 swing < 0.02 * 3.0 && lag > 0.0,
                 "cap × {f}, watched: {swing} mca, {lag} s, acted at {acted:?} ms"
@@ -3020,9 +3020,9 @@ mod tests {
     fn a_ring_that_touches_the_torque_limit_is_watched_too() {
         let (.., u0, _, _) = bench_at(3.0);
         for over in [5.0f32, 10.0, 15.0] {
-            let (swing, lag, _) = ring_near_cap(3.0, 250, false, None, u0 + over);
+            let (swing, lag, _) = ring_limited(3.0, 250, false, None, u0 + over);
             assert!(swing > 0.3 && lag == 0.0, "+{over} %: {swing} mca, {lag} s");
-            let (swing, lag, acted) = ring_near_cap(3.0, 250, true, None, u0 + over);
+            let (swing, lag, acted) = ring_limited(3.0, 250, true, None, u0 + over);
             assert!(
                 swing < 0.02 * 3.0 && lag > 0.0,
                 "+{over} %, watched: {swing} mca, {lag} s, acted at {acted:?} ms"
