@@ -308,6 +308,15 @@ impl Controlled {
         }
     }
 
+    /// The transmitter's time constant as set and its default, s (registers 15, 16: the
+    /// lag the error assumes).
+    fn lag_setting(self, s: &ControlSettings) -> (f32, f32) {
+        match self {
+            Controlled::Pressure => (s.pressure_lag_s, ControlSettings::DEFAULT.pressure_lag_s),
+            Controlled::Flow => (s.flow_lag_s, ControlSettings::DEFAULT.flow_lag_s),
+        }
+    }
+
     /// The closed-loop time constant asked (λ), s, and the default it was set against.
     fn closed_loop_s(self, s: &ControlSettings) -> (f32, f32) {
         let (asked, default) = match self {
@@ -1037,20 +1046,13 @@ impl Regulator {
         };
         // The error against the reference as the transmitter shows it: a plant that follows
         // the reference exactly gives no error while its reading lags behind it.
-        let lag_s = match self.controlled {
-            Controlled::Pressure => s.pressure_lag_s,
-            Controlled::Flow => s.flow_lag_s,
-        };
+        let (lag_s, default) = self.controlled.lag_setting(s);
         // With the model, a plant that lags more than the defaults cover is taken at least as
         // calmly as the lag measured asks of the defaults (settings calmer still stand); with
         // nothing measured beyond the defaults, the setting as it is, below the default too.
         // (`within`: the lag the error assumes is no longer than the default, neither set
         // nor measured longer: the gains may rise between moves.)
         let (lag_s, within) = if plant.is_some() {
-            let default = match self.controlled {
-                Controlled::Pressure => ControlSettings::DEFAULT.pressure_lag_s,
-                Controlled::Flow => ControlSettings::DEFAULT.flow_lag_s,
-            };
             let lag_s = self.calmed(lag_s, default);
             (lag_s, lag_s <= default)
         } else {
@@ -1566,7 +1568,20 @@ impl Regulator {
         // λ as asked (below the default too), but never under twice the lag measured, and
         // beyond what the defaults cover at least the default calmed (a review: λ = 60 ms on
         // a plant lagging 95 ms overshot 41 %).
-        let floor = 2.0 * self.probe.lag_s;
+        // The lag known is the one measured or, if longer, the one the transmitter's setting
+        // tells (registers 15, 16): set slower than its default, the difference added to
+        // what the defaults cover, as the probe would measure it on a setpoint step (it
+        // measures the transmitter with the rest). Without it, a loop told the truth before
+        // any step had taught the probe ran as fast as the defaults: a hostile review's flow
+        // meter damped over 1 s, written into register 16, cycled for good between 4 and
+        // 15 l/s at 10, the torque 0 ↔ 68 % (docs/control.md, Limits).
+        let (set, set_default) = c.lag_setting(s);
+        let told = if set > set_default {
+            set - set_default + self.probe.covered_s
+        } else {
+            0.0
+        };
+        let floor = 2.0 * Real::max(self.probe.lag_s, told);
         let lambda = self.calmed(if asked > floor { asked } else { floor }, default);
         (
             inv.torque_ref_pct,
@@ -2017,6 +2032,57 @@ mod tests {
             (at_default.kc / calmed.kc - CALM_MAX).abs() < 1e-3,
             "{calmed:?}"
         );
+    }
+
+    /// A transmitter set slower than its default (registers 15, 16) floors λ at twice the lag
+    /// it tells (the difference added to what the defaults cover), on both loops, before
+    /// any lag is measured; set at its default or faster, or with λ asked longer still, the
+    /// gains are as they were. (Before, a flow meter set at 1 s ran at the default λ and a
+    /// hostile review's plant cycled for good, 4 ↔ 15 l/s at 10.)
+    #[test]
+    fn a_transmitter_set_slower_floors_lambda() {
+        let p = BenchParams::<f32>::PAPER;
+        for (c, at, covered) in [
+            (Controlled::Pressure, 3.0, COVERED_LAG_PRESSURE_S),
+            (Controlled::Flow, 12.0, COVERED_LAG_FLOW_S),
+        ] {
+            let gains = |lag: f32, lambda: f32| {
+                let mut s = ControlSettings::DEFAULT;
+                match c {
+                    Controlled::Pressure => {
+                        s.pressure_lag_s = lag;
+                        s.pressure_closed_loop_s = lambda;
+                    }
+                    Controlled::Flow => {
+                        s.flow_lag_s = lag;
+                        s.flow_closed_loop_s = lambda;
+                    }
+                }
+                let mut r = Regulator::new(c, at, 50.0, 1300.0);
+                r.model_terms(&p, paper_load(&p), &s, 0.0).2
+            };
+            let set_default = c.lag_setting(&ControlSettings::DEFAULT).1;
+            let lambda_default = c.closed_loop_s(&ControlSettings::DEFAULT).0;
+            let at_default = gains(set_default, lambda_default);
+            assert_eq!(
+                gains(0.5 * set_default, lambda_default),
+                at_default,
+                "{c:?}"
+            );
+            let slow = set_default + 0.75;
+            let floored = gains(slow, lambda_default);
+            let told = slow - set_default + covered;
+            let expect = at_default.kc * lambda_default / (2.0 * told);
+            assert!(
+                (floored.kc / expect - 1.0).abs() < 1e-3,
+                "{c:?} {floored:?}"
+            );
+            assert_eq!(floored.ti_s, at_default.ti_s, "{c:?}");
+            // λ asked longer than the floor stands.
+            let calm = gains(slow, 4.0 * told);
+            let expect = at_default.kc * lambda_default / (4.0 * told);
+            assert!((calm.kc / expect - 1.0).abs() < 1e-3, "{c:?} {calm:?}");
+        }
     }
 
     /// The loop calms with the lag it measured: not below what the defaults cover, then as
