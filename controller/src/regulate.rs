@@ -3120,7 +3120,7 @@ mod tests {
             let mut u = u0;
             let factor = |k: u32| {
                 let n = k.saturating_sub(2000) / every_ms;
-                if k >= 2000 && n < 4 && n % 2 == 0 {
+                if k >= 2000 && n < 4 && n.is_multiple_of(2) {
                     1.3
                 } else {
                     1.0
