@@ -548,8 +548,14 @@ impl LagProbe {
     /// `covered_s`, then as the square of the ratio, at most [`CALM_MAX`].
     fn set_lag(&mut self, lag_s: f32) {
         self.lag_s = lag_s;
-        let r = Real::max(lag_s / self.covered_s, 1.0);
+        let r = self.ratio();
         self.calm = Real::min(r * r, CALM_MAX);
+    }
+
+    /// The lag over what the defaults cover, at least 1: the loop runs calmer as its square
+    /// (`calm`), and the ring watch waits longer for a crossing as the ratio itself.
+    fn ratio(&self) -> f32 {
+        Real::max(self.lag_s / self.covered_s, 1.0)
     }
 }
 
@@ -878,8 +884,8 @@ impl Regulator {
     /// ([`RING_SMOOTHING`]) and watched against a band of ±[`RING_BAND_FRACTION`] of the
     /// setpoint (of 2 mca or 10 l/s at least). [`RING_CROSSINGS`] crossings in a row from
     /// beyond one side to beyond the other, each within [`RING_GAP_PERIODS`] of the last (×
-    /// the loop's lag over what the defaults cover, at most × 2), are a ring; so is, from the third crossing on, a swing (the error's peak between two
-    /// crossings) of at least [`RING_LARGE_FRACTION`] of the setpoint and
+    /// the loop's lag over what the defaults cover, at most × 2), are a ring; so is, from the
+    /// third crossing on, a swing (the error's peak between two crossings) of at least [`RING_LARGE_FRACTION`] of the setpoint and
     /// [`RING_DECAY_RATIO`] of the swing before it: the loop's gain is too high for a plant
     /// that lags more than the model and the lag measured on its steps say. The lag the loop takes ([`Regulator::lag_s`]) is then
     /// raised to [`RING_LAG_FACTOR`] × what it was, at least × what the defaults cover, at
@@ -929,12 +935,11 @@ impl Regulator {
         if side == self.ring_side {
             return;
         }
-        // Crossings at most [`RING_GAP_PERIODS`] apart, × the loop's lag over what the
-        // defaults cover (at most 2).
+        // Crossings at most [`RING_GAP_PERIODS`] apart, × the lag's ratio (at most 2, the
+        // square root of [`CALM_MAX`]: as far as the loop calms).
         self.ring_count = if self.ring_side != 0
             && f32::from(self.ring_age)
-                <= f32::from(RING_GAP_PERIODS)
-                    * Real::min(at_least(self.probe.lag_s / self.probe.covered_s, 1.0), 2.0)
+                <= f32::from(RING_GAP_PERIODS) * Real::min(self.probe.ratio(), 2.0)
         {
             self.ring_count + 1
         } else {
@@ -3079,9 +3084,9 @@ mod tests {
 
     /// A ring whose half-periods last longer than 1 s is watched too: behind 500 and 600 ms
     /// of delay, 20 s. The watch counted crossings at most 1 s apart before
-    /// ([`RING_GAP_PERIODS`] is 2 s now): it raised the lag once and the ring, slower for it, went on (0.89 mca of swing
-    /// at 1 mca behind 600 ms over the last 2 s, 0.39 and 4.4 at 3 mca behind 500 and
-    /// 600 ms). A hostile review's heavy rotor behind a flow meter damped over 1 s so cycled
+    /// ([`RING_GAP_PERIODS`] is 2 s now): it raised the lag once and the ring, slower for it,
+    /// went on (0.89 mca of swing at 1 mca behind 600 ms over the last 2 s, 0.39 and 4.4 at
+    /// 3 mca behind 500 and 600 ms). A hostile review's heavy rotor behind a flow meter damped over 1 s so cycled
     /// for good, ±30 % at 10 l/s, half-periods of 1.5 s.
     #[test]
     fn a_slow_ring_is_watched_too() {
