@@ -8,10 +8,13 @@ Each plant draws, from one seeded generator (the same seed, the same plants):
   the others keep pumpbench's 40 ms); curve error up to +-10 % and curve shape up to +-30 % on
   each curve (head, torque); a water column of 0.01..0.1 mca.s2/l on three plants in ten; a
   noise seed. Each plant runs the five built-in scenarios, both laws, with --targets.
+  With --lift MCA each plant also has a static lift drawn in 0..MCA (from a generator of its
+  own: the same plants otherwise), which --tell writes into holding register 20 (the
+  models' static head) as commissioning would.
 
 Usage:
   python3 tools/random_plants.py --bin target/release/pumpbench --plants 200 --seed 3 \
-      [--jobs 2] [--out runs.tsv] [--against older.tsv] [--speed-lag-ms 50]
+      [--jobs 2] [--out runs.tsv] [--against older.tsv] [--speed-lag-ms 50] [--lift 2 [--tell]]
 
 Prints the totals (figure targets met by each law, comparisons the model law won, trips,
 NaN or torque-limit failures), the model law's misses per scenario and figure, and with
@@ -108,13 +111,29 @@ def main():
     ap.add_argument("--speed-lag-ms", type=float, default=0.0,
                     help="every plant's drive reads its speed through this lag, ms (the same "
                          "plants otherwise; 0: none, the speed as it is)")
+    ap.add_argument("--lift", type=float, default=0.0,
+                    help="every plant has a static lift drawn in 0..LIFT mca (pumpbench's "
+                         "--static-head; the same plants otherwise; 0: the paper's -0.252)")
+    ap.add_argument("--tell", action="store_true",
+                    help="with --lift, write each plant's lift into holding register 20")
     a = ap.parse_args()
+    if not 0.0 <= a.lift <= 5.0:
+        ap.error("--lift must be within 0..5 mca")
+    if a.tell and a.lift == 0.0:
+        ap.error("--tell needs --lift")
 
     rng = random.Random(a.seed)
     plants = [draw(rng) for _ in range(a.plants)]
     if a.speed_lag_ms > 0:
         for p in plants:
             p["speed-lag-ms"] = a.speed_lag_ms
+    if a.lift > 0:
+        lifts = random.Random(a.seed ^ 0x11F7)
+        for p in plants:
+            h = round(lifts.uniform(0.0, a.lift), 2)
+            p["static-head"] = h
+            if a.tell:
+                p["set"] = f"20={round(h * 1000)}"
     work = [(i, p, s) for i, p in enumerate(plants) for s in SCENARIOS]
     results = {}
     failed = []

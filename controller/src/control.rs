@@ -421,6 +421,11 @@ pub struct Commands {
     pub protection: ProtectionConfig,
     /// The pressure and flow loops' settings (holding registers 8..=18).
     pub control: ControlSettings,
+    /// The system's static head as the models take it, mca (holding register 20,
+    /// −10..=10): the pressure the system curve asks at no flow, `−c` of eq. (8) (the
+    /// paper's bench −0.252; a lift is positive). A change moves the white-box bench's, the
+    /// observer's ([`Observer::set_static_head`]) and the loops' model (bumpless).
+    pub static_head_mca: f32,
 }
 
 /// What the VFD link last established (see [`crate::vfd::VfdMaster`]).
@@ -690,6 +695,21 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
         c.pressure.reseed(Arithmetic::F32, 0.0, s.pressure_mca);
         c.flow.reseed(Arithmetic::F32, 0.0, s.flow_lps);
         Ok(c)
+    }
+
+    /// The models take the static head `c_mca` (eq. (8)'s c, mca; [`Commands::static_head_mca`]
+    /// negated): the white-box bench at its nominal valve, the observer (its k2 moved so the
+    /// operating point stays), the loop's feedforward solved again at the next period, its
+    /// change taken by the integral. A non-finite `c_mca` changes nothing.
+    #[inline(never)]
+    fn take_static_head(&mut self, c_mca: f32) {
+        let k2 = self.whitebox.params().valve_k2;
+        if self.whitebox.set_load(k2, c_mca).is_ok() && self.observer.set_static_head(c_mca).is_ok()
+        {
+            if let Some(r) = self.regulator.as_mut() {
+                r.model_changed();
+            }
+        }
     }
 
     /// Time of the next step, ms (steps since start).
@@ -1115,6 +1135,10 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             } else {
                 0
             };
+        }
+        let c = -inp.commands.static_head_mca;
+        if c != self.whitebox.params().static_head_c_mca {
+            self.take_static_head(c);
         }
         let control = self.control_due();
         let take_p = now.is_multiple_of(self.pressure.period_ms);

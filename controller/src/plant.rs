@@ -297,7 +297,7 @@ pub enum Request {
     Frame(PlantFrame),
     /// `W <register> <value>`: a holding-register write.
     Write {
-        /// Holding register address (0..=65535; the map has 0..=19).
+        /// Holding register address (0..=65535; the map has 0..=20).
         register: u16,
         /// The value (0..=65535).
         value: u16,

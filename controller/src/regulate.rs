@@ -601,6 +601,9 @@ pub struct Regulator {
     near: SteadyInverse<f32>,
     /// The load the last period's feedforward was computed at.
     load: Option<Load<f32>>,
+    /// The model changed since (its static head, [`Regulator::model_changed`]): the next
+    /// period solves again, as for a new load.
+    remodel: bool,
     /// The last torque was held at the range's end (not only the rate's) against the want.
     at_range_limit: bool,
     /// The reference as the transmitter would show it (lagged by its time constant): what the
@@ -693,6 +696,7 @@ impl Regulator {
             integral_pct: 0.0,
             last_pct: torque_pct,
             fresh: true,
+            remodel: false,
             load: None,
             at_range_limit: false,
             seen_reference: measured,
@@ -962,6 +966,12 @@ impl Regulator {
             );
             p.set_lag(p.floor_s);
         }
+    }
+
+    /// The model changed (the system's static head): the next period solves the feedforward
+    /// again, and the integral takes its change (bumpless), as for a new load.
+    pub fn model_changed(&mut self) {
+        self.remodel = true;
     }
 
     /// The reference is on its way to a new setpoint (more than [`MOVING_FRACTION`] of it
@@ -1523,7 +1533,8 @@ impl Regulator {
             Target::PressureMca(h) => self.near.pressure_mca == h,
             Target::FlowLps(q) => self.near.flow_lps == q,
         };
-        let same_load = self.load == Some(load);
+        let same_load = self.load == Some(load) && !self.remodel;
+        self.remodel = false;
         let inv = if at_target && same_load {
             self.near
         } else if let Ok(inv) = steady_torque_near(bench, load, target, &self.near) {
@@ -2761,6 +2772,37 @@ mod tests {
                 valve_seen_late(scale, false, false)
             );
         }
+    }
+
+    /// A static head written under a settled loop ([`Regulator::model_changed`]): the next
+    /// period's feedforward is the new model's steady torque, and the integral takes the
+    /// change, so the torque does not step; without the call the last solution stands (the
+    /// load and the target unchanged).
+    #[test]
+    fn a_changed_model_moves_the_feedforward_not_the_torque() {
+        let (p, _, load, u0, st, read) = bench_at(3.0);
+        let s = ControlSettings::DEFAULT;
+        let mut reg = Regulator::new(Controlled::Pressure, read, u0, st.speed_rpm);
+        for _ in 0..400 {
+            reg.step(&p, load, &s, read, read);
+        }
+        let before = reg.last();
+        let lifted = BenchParams {
+            static_head_c_mca: -1.0,
+            ..p
+        };
+        let ff = steady_torque(&lifted, load, Target::PressureMca(read))
+            .unwrap()
+            .torque_ref_pct;
+        let (mut told, mut untold) = (reg, reg);
+        told.model_changed();
+        let a = told.step(&lifted, load, &s, read, read);
+        let b = untold.step(&lifted, load, &s, read, read);
+        eprintln!("before {before:?}\ntold {a:?}\nuntold {b:?}\nnew model's {ff}");
+        assert!((a.feedforward_pct - ff).abs() < 0.01, "{a:?}: {ff}");
+        assert!((a.feedforward_pct - before.feedforward_pct).abs() > 1.0);
+        assert!((a.torque_pct - before.torque_pct).abs() < 0.01, "{a:?}");
+        assert_eq!(b.feedforward_pct, before.feedforward_pct);
     }
 
     /// A valve pushing the reading back during a move stops the braking: it would brake

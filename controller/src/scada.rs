@@ -58,6 +58,7 @@
 //! | 17 | pressure loop's closed-loop time constant (IMC λ), ms (default 200): longer is calmer, for plants with a water column or a slow drive | 60..=10000 |
 //! | 18 | flow loop's closed-loop time constant, ms (default 300) | 60..=10000 |
 //! | 19 | NARMAX models following the load: 0 off (one-step-ahead on the measurements, default), 1 on (each model runs free and an affine map of its output is fitted to the measurements, [`model_core::narmax::adapt`]); writing 0 forgets the maps | 0..=1 |
+//! | 20 | the system's static head as the models take it: the pressure the system curve asks at no flow, `Hs(0) = −c` of eq. (8), 0.001 mca, signed (default −252: the paper's bench, its transmitter 0.252 m above the tank's level); a lift (the outlet's level above the suction's) is positive | −10000..=10000 |
 //!
 //! Holding registers 3 and 4 exist only with a virtual bench ([`ScadaSlave::with_virtual_bench`]):
 //! on a board without one they answer exception 02 like any address outside the map, and so
@@ -83,8 +84,13 @@ use crate::types::{
 
 /// Input registers.
 pub const INPUT_REGISTERS: usize = 30;
-/// Holding registers (0..=19; 3 and 4 only with a virtual bench).
-pub const HOLDING_REGISTERS: usize = 20;
+/// Holding registers (0..=20; 3 and 4 only with a virtual bench).
+pub const HOLDING_REGISTERS: usize = 21;
+/// Holding register 20: the static heads accepted, 0.001 mca (the register read as an
+/// `i16`).
+pub const STATIC_HEAD_RANGE: core::ops::RangeInclusive<i16> = -10_000..=10_000;
+/// Holding register 20's default: the paper's bench, `−c` (−0.252 mca) in 0.001 mca.
+pub const STATIC_HEAD_DEFAULT: i16 = (-model_core::params::PAPER_C_MCA * 1000.0 - 0.5) as i16;
 /// Largest setpoint filter and transmitter time constant (holding registers 13, 15, 16), ms.
 pub const SETPOINT_FILTER_MAX_MS: u16 = 10_000;
 /// Holding registers 17 and 18: the closed-loop time constants accepted, ms. Below 60 ms
@@ -425,6 +431,9 @@ pub struct ScadaSlave {
     pub protection: ProtectionConfig,
     /// The loops' settings (holding registers 8..=18).
     pub control: ControlRegisters,
+    /// The system's static head, 0.001 mca as an `i16` in its two's complement (holding
+    /// register 20, [`STATIC_HEAD_RANGE`]).
+    pub static_head: u16,
 }
 
 impl ScadaSlave {
@@ -444,6 +453,7 @@ impl ScadaSlave {
             setpoint_writes: 0,
             protection: ProtectionConfig::DEFAULT,
             control: ControlRegisters::DEFAULT,
+            static_head: STATIC_HEAD_DEFAULT as u16,
         })
     }
 
@@ -476,6 +486,7 @@ impl ScadaSlave {
             self.control.pressure_closed_loop_ms,
             self.control.flow_closed_loop_ms,
             u16::from(self.narmax_adapt),
+            self.static_head,
         ]
     }
 
@@ -493,6 +504,7 @@ impl ScadaSlave {
             setpoint_writes: self.setpoint_writes,
             protection: self.protection,
             control: self.control.settings(),
+            static_head_mca: f32::from(self.static_head as i16) / 1000.0,
         }
     }
 
@@ -573,6 +585,7 @@ impl ScadaSlave {
                         next.narmax_adapt_offs = next.narmax_adapt_offs.wrapping_add(1);
                     }
                 }
+                20 if STATIC_HEAD_RANGE.contains(&(v as i16)) => next.static_head = v,
                 _ => return Err(Exception::IllegalDataValue),
             }
         }
@@ -977,10 +990,41 @@ mod tests {
         ask(&mut s, &frame(&[1, 6, 0, 19, 0, 0])).unwrap();
         assert!(!s.commands().narmax_adapt);
         assert_eq!(
-            exception(&mut s, &[1, 3, 0, 19, 0, 2]),
+            exception(&mut s, &[1, 3, 0, 20, 0, 2]),
             2,
-            "nothing after 19"
+            "nothing after 20"
         );
+    }
+
+    /// Holding register 20: the static head, signed 0.001 mca, the paper's −0.252 mca by
+    /// default (the core's c of 0.252 to the bit), −10..=10 mca and nothing else.
+    #[test]
+    fn register_20_is_the_static_head_signed() {
+        let mut s = ScadaSlave::new(1).unwrap();
+        assert_eq!(s.holding()[20], (-252i16) as u16);
+        let c = -s.commands().static_head_mca;
+        assert_eq!(c, model_core::BenchParams::<f32>::PAPER.static_head_c_mca);
+        for (v, mca) in [
+            (1500i16, 1.5f32),
+            (-10_000, -10.0),
+            (10_000, 10.0),
+            (0, 0.0),
+        ] {
+            let [hi, lo] = v.to_be_bytes();
+            ask(&mut s, &frame(&[1, 6, 0, 20, hi, lo])).unwrap();
+            assert_eq!(s.commands().static_head_mca, mca);
+            let r = ask(&mut s, &frame(&[1, 3, 0, 20, 0, 1])).unwrap();
+            assert_eq!(&r[3..5], &[hi, lo]);
+        }
+        for v in [10_001i16, -10_001, i16::MIN, i16::MAX] {
+            let [hi, lo] = v.to_be_bytes();
+            assert_eq!(exception(&mut s, &[1, 6, 0, 20, hi, lo]), 3, "{v}");
+            assert_eq!(
+                s.commands().static_head_mca,
+                0.0,
+                "a refused write changes nothing"
+            );
+        }
     }
 
     /// The holding registers ↔ the core's types: every valid register value round trips, and

@@ -18,6 +18,7 @@ const FLOW_SP: u8 = 9;
 const TORQUE_MIN: u8 = 10;
 const TORQUE_MAX: u8 = 11;
 const LAW: u8 = 14;
+const STATIC_HEAD: u8 = 20;
 
 /// Runs `ms` ms; each step's applied torque (the board's output).
 fn torques(b: &mut Board, ms: u32) -> Vec<f32> {
@@ -304,6 +305,37 @@ fn a_change_of_law_in_pressure_control_is_bumpless() {
             })
             .fold(0.0f32, f32::max);
         assert!(worst < 0.06, "law {law}: {worst} mca off after 3 s");
+    }
+}
+
+/// Register 20 written under a running pressure loop: the models take another static head
+/// (here a wrong one, 1 mca of lift the bench does not have, then the paper's again), the
+/// torque does not step, and the loop holds its setpoint through the wrong model. The
+/// observer's k2 moves with the head so that the model still passes through the operating
+/// point: the feedforward still holds it, and the integral (input register 29, 0.01 %) stays
+/// small (at a k2 left where it was, the model at 1 mca of lift is ≈ 20 % of torque short).
+#[test]
+fn a_static_head_written_in_pressure_control_is_bumpless() {
+    let mut b = holding_pressure(3.0);
+    for head in [1000i16, -252] {
+        let before = b.io.torque_ref_pct();
+        write_holding(&mut b, STATIC_HEAD, head as u16);
+        let mut t = torques(&mut b, 100);
+        let integral = input(&mut b, 29) as i16;
+        assert!(integral.abs() < 300, "{head}: the integral at {integral}");
+        t.extend(torques(&mut b, 2900));
+        assert!(
+            largest_step(before, &t) <= 0.2 + 1e-4,
+            "{head}: a step of {}",
+            largest_step(before, &t)
+        );
+        let worst = (0..3000)
+            .map(|_| {
+                run(&mut b, 1);
+                (b.io.bench.signals().pressure_mca - 3.0).abs()
+            })
+            .fold(0.0f32, f32::max);
+        assert!(worst < 0.06, "{head}: {worst} mca off after 3 s");
     }
 }
 

@@ -602,7 +602,15 @@ mod tests {
     fn each_alarm_is_raised_by_its_fault_within_its_delay() {
         let c = MonitorConfig::<f64>::paper();
         // (name, rows, fault start, injection, bit, latest raise after the fault, s)
-        let dry = record_with(12, 60.0, 0.03, &[], Some(30.0), 1.0);
+        let dry = record_with(
+            12,
+            60.0,
+            0.03,
+            &[],
+            Some(30.0),
+            1.0,
+            crate::params::PAPER_C_MCA,
+        );
         let closed = record(13, 60.0, 0.03, &[(30.0, 10.0)]);
         let moved = record(15, 60.0, 0.03, &[(30.0, 1.3)]);
         let plain = record(16, 60.0, 0.03, &[]);

@@ -161,7 +161,7 @@ pub struct ControlArgs {
     #[arg(long, conflicts_with_all = [
         "scenario", "controller", "targets", "output", "plot", "set", "seed", "hold_s",
         "flow_lag_ms", "curve_error", "curve_shape", "water_inertia", "drive_lag_ms", "rotor_inertia",
-        "pressure_lag_ms", "speed_lag_ms",
+        "pressure_lag_ms", "speed_lag_ms", "static_head",
     ])]
     pub plant_stdio: bool,
     /// The law(s) to run.
@@ -189,8 +189,9 @@ pub struct ControlArgs {
     pub plant: PlantArgs,
     /// A holding-register write before the run, as commissioning sets it (repeatable), e.g.
     /// `--set 15=110` (the pressure transmitter's time constant, ms) or `--set 11=8000` (the
-    /// torque high limit, 0.01 %); a value the map refuses is an error.
-    #[arg(long, value_name = "REGISTER=VALUE")]
+    /// torque high limit, 0.01 %); a signed register takes a negative value (`--set 20=-252`,
+    /// the static head, 0.001 mca); a value the map refuses is an error.
+    #[arg(long, value_name = "REGISTER=VALUE", allow_hyphen_values = true)]
     pub set: Vec<String>,
     /// First-order lag of the flow transmitter, ms (0..2000; 0: none). Default: the
     /// scenario's (flow-steps: 150), else 40.
@@ -558,6 +559,17 @@ pub struct PlantArgs {
         allow_hyphen_values = true
     )]
     pub speed_lag_ms: String,
+    /// The TRUE system's static head, mca (-1..5): its pressure at no flow, -c of the
+    /// valve's equation (the paper's bench -0.252, its transmitter above the tank's level;
+    /// a lift, the outlet above the suction's level, is positive). Under it the pump moves
+    /// no water. The controller's models take theirs from holding register 20.
+    #[arg(
+        long,
+        value_name = "MCA",
+        default_value = "-0.252",
+        allow_hyphen_values = true
+    )]
+    pub static_head: String,
 }
 
 /// A value parser: a finite number > 0.

@@ -50,6 +50,7 @@ use model_core::equations::{
     FLOW_TERMS,
 };
 use model_core::excitation::SplitMix64;
+use model_core::params::PAPER_C_MCA;
 use model_core::transmitter::lag_to;
 use model_core::{BenchParams, BenchState, Scheme, WhiteBox, MAX_STEP_S};
 
@@ -424,6 +425,32 @@ pub struct PlantOptions {
     /// The drive's speed reading's first-order lag, s (0: the rotor's speed as it is; a
     /// drive's filtered speed estimate lags it).
     pub speed_lag_s: f64,
+    /// The system curve's pressure at no flow, mca ([`STATIC_HEAD_RANGE_MCA`]): `−c` of eq.
+    /// (8), the paper's −0.252; a lift (the outlet above the suction's level) is positive.
+    /// Under it the pump moves no water and the transmitter reads it (a check valve holds
+    /// the column).
+    pub static_head_mca: f64,
+}
+
+/// `--static-head`'s range, mca: from the paper's bench's side (the transmitter above the
+/// tank's level) to a lift of 5 mca (the pump gives ≈ 11 mca of head at no flow at
+/// 1 000 rpm, 32 at its nominal 1 749).
+pub const STATIC_HEAD_RANGE_MCA: (f64, f64) = (-1.0, 5.0);
+
+/// Parses `--static-head MCA`: finite, within [`STATIC_HEAD_RANGE_MCA`].
+pub fn parse_static_head(text: &str) -> Result<f64, String> {
+    let h = finite("--static-head", text)?;
+    let (lo, hi) = STATIC_HEAD_RANGE_MCA;
+    if (lo..=hi).contains(&h) {
+        Ok(h)
+    } else {
+        Err(format!(
+            "--static-head {}: must be within {}..{} mca",
+            Short(h),
+            Short(lo),
+            Short(hi)
+        ))
+    }
 }
 
 impl PlantOptions {
@@ -438,6 +465,7 @@ impl PlantOptions {
             flow_lag_s: FLOW.tau_s,
             pressure_lag_s: PRESSURE.tau_s,
             speed_lag_s: SPEED.tau_s,
+            static_head_mca: -PAPER_C_MCA,
         }
     }
 }
@@ -530,7 +558,8 @@ impl Plant {
     ) -> Result<Self, PlantError> {
         let bench = true_bench(o.curve_error, o.rotor_inertia).map_err(PlantError::Options)?;
         let nominal_k2 = bench.params().valve_k2;
-        let static_head_c_mca = bench.params().static_head_c_mca;
+        // (−(−c) is c to the bit: the paper's plant as before.)
+        let static_head_c_mca = -o.static_head_mca;
         let mut plant = Plant {
             bench,
             nominal_k2,

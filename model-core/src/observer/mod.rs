@@ -189,6 +189,31 @@ impl<T: Real> Observer<T> {
         &self.cfg
     }
 
+    /// Takes the system curve's static head c (mca, eq. (8): `Hs = k2² Q² − c`; the paper's
+    /// 0.252, a lift is c < 0), as commissioning writes it. The valve's k2 moves with it so
+    /// that the system curve still passes through the operating point now (the same
+    /// pressure at the same flow): the state and its covariance stay, and the next steps
+    /// find k2 from there. At no flow (or a curve that cannot pass there) k2 stays.
+    /// A non-finite `c_mca` is refused; nothing changes then.
+    pub fn set_static_head(&mut self, c_mca: T) -> Result<(), ObserverError> {
+        if !c_mca.is_finite() {
+            return Err(ObserverError::Model(crate::BenchError::InvalidParameter(
+                "the static head must be finite",
+            )));
+        }
+        let q = self.flow_now;
+        if q > T::from_f64(0.1) {
+            let k2 = self.x[K2];
+            let k2_sq = k2 * k2 + (c_mca - self.cfg.params.static_head_c_mca) / (q * q);
+            if k2_sq > T::ZERO {
+                self.x[K2] = k2_sq.sqrt();
+            }
+        }
+        self.cfg.params.static_head_c_mca = c_mca;
+        self.h_now = None;
+        Ok(())
+    }
+
     /// Restarts at the model's steady state for `torque_ref_pct`, nominal valve and curves,
     /// the initial covariance.
     pub fn reset(&mut self, torque_ref_pct: T) {
@@ -345,8 +370,10 @@ impl<T: Real> Observer<T> {
     /// module docs): outside it a value is not used.
     fn plausible_range(&self, ch: usize) -> (T, T) {
         match ch {
+            // Down to the system curve's head at no flow, and to 0 with a lift (c < 0): an
+            // outlet transmitter before the check valve reads the pump's head under it.
             0 => (
-                -self.cfg.params.static_head_c_mca - T::from_f64(0.5),
+                (-self.cfg.params.static_head_c_mca).min(T::ZERO) - T::from_f64(0.5),
                 T::from_f64(60.0),
             ),
             1 => (T::from_f64(-0.5), T::from_f64(60.0)),

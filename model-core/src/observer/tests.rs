@@ -3,6 +3,7 @@
 
 use super::*;
 use crate::excitation::{PulseTrain, SplitMix64, SteppedPulses};
+use crate::params::PAPER_C_MCA;
 use crate::transmitter::{lag_exact, noise};
 use crate::{BenchParams, Scheme, WhiteBox};
 
@@ -37,12 +38,13 @@ pub(crate) struct Row {
 /// `steps` (time s, × nominal k2), transmitter lags (20 / 40 ms) and noise (3 mm, 0.02
 /// l/s, 0.5 rpm).
 pub(crate) fn record(seed: u64, seconds: f64, e: f64, steps: &[(f64, f64)]) -> Vec<Row> {
-    record_with(seed, seconds, e, steps, None, 1.0)
+    record_with(seed, seconds, e, steps, None, 1.0, PAPER_C_MCA)
 }
 
 /// As [`record`], and from `dry_from_s` on the pump runs dry: no flow, the outlet at its
 /// static level (−c), the load torque only the friction part of the curve (β9 ω + β10);
-/// with each valve step the pipe's k1 becomes `k1_factor` × the paper's (a broken pipe).
+/// with each valve step the pipe's k1 becomes `k1_factor` × the paper's (a broken pipe);
+/// the system curve's static head is `c_mca` (eq. (8); the paper's [`PAPER_C_MCA`]).
 pub(crate) fn record_with(
     seed: u64,
     seconds: f64,
@@ -50,8 +52,10 @@ pub(crate) fn record_with(
     steps: &[(f64, f64)],
     dry_from_s: Option<f64>,
     k1_factor: f64,
+    c_mca: f64,
 ) -> Vec<Row> {
     let mut par = BenchParams::<f64>::paper();
+    par.static_head_c_mca = c_mca;
     for a in par.alpha.iter_mut() {
         *a *= 1.0 + e;
     }
@@ -183,6 +187,60 @@ fn tracks_valve_steps_and_curve_errors() {
         );
         assert!(worst < 0.03, "k2 off by {:.2} %", worst * 100.0);
     }
+}
+
+/// On a bench with a lift of 1 mca (c = −1, the paper's +0.252), an observer told the
+/// static head finds k2 within 3 %; one left at the paper's c finds a k2 that makes the
+/// pressure at each flow (it is off by more). The switch moves nothing but k2: the next
+/// estimate's pressure and flow are where the last ones were.
+#[test]
+fn a_static_head_commissioned_moves_k2_onto_the_lift() {
+    let rows = record_with(5, 60.0, 0.0, &[], None, 1.0, -1.0);
+    let worst = |told_at: Option<usize>| {
+        let mut o = Observer::<f64>::new(ObserverConfig::paper(), 20.0).unwrap();
+        let mut worst: f64 = 0.0;
+        let mut last: Option<Estimate<f64>> = None;
+        for (i, r) in rows.iter().enumerate() {
+            if told_at == Some(i) {
+                o.set_static_head(-1.0).unwrap();
+                assert_eq!(o.config().params.static_head_c_mca, -1.0);
+            }
+            let m = Measurements {
+                pressure_mca: Some(r.p_meas),
+                flow_lps: (i % 2 == 1).then_some(r.q_meas),
+                speed_rpm: Some(r.w_meas),
+            };
+            let x = o.step(0.05, r.torque_pct, &m).unwrap();
+            if told_at == Some(i) {
+                let l = last.unwrap();
+                assert!(
+                    (x.pressure_mca - l.pressure_mca).abs() < 0.05,
+                    "{x:?} {l:?}"
+                );
+                assert!((x.flow_lps - l.flow_lps).abs() < 0.2, "{x:?} {l:?}");
+            }
+            if r.t_s > 30.0 {
+                worst = worst.max((x.valve_k2 / r.k2 - 1.0).abs());
+            }
+            last = Some(x);
+        }
+        worst
+    };
+    let (told, untold) = (worst(Some(400)), worst(None));
+    println!(
+        "k2 worst: told {:.2} %, untold {:.2} %",
+        told * 100.0,
+        untold * 100.0
+    );
+    assert!(told < 0.03, "k2 off by {:.2} %", told * 100.0);
+    assert!(
+        untold > 0.1,
+        "untold k2 off by only {:.2} %",
+        untold * 100.0
+    );
+    let mut o = Observer::<f64>::new(ObserverConfig::paper(), 20.0).unwrap();
+    assert!(o.set_static_head(f64::NAN).is_err());
+    assert_eq!(o.config().params.static_head_c_mca, PAPER_C_MCA);
 }
 
 #[test]
