@@ -194,12 +194,10 @@ impl<T: Real> Observer<T> {
     /// that the system curve still passes through the operating point now (the same
     /// pressure at the same flow): the state and its covariance stay, and the next steps
     /// find k2 from there. At no flow (or a curve that cannot pass there) k2 stays.
-    /// A non-finite `c_mca` is refused; nothing changes then.
+    /// A non-finite `c_mca` is refused ([`ObserverError::Config`]); nothing changes then.
     pub fn set_static_head(&mut self, c_mca: T) -> Result<(), ObserverError> {
         if !c_mca.is_finite() {
-            return Err(ObserverError::Model(crate::BenchError::InvalidParameter(
-                "the static head must be finite",
-            )));
+            return Err(ObserverError::Config);
         }
         let q = self.flow_now;
         if q > T::from_f64(0.1) {
