@@ -47,7 +47,6 @@ use model_core::narmax::adapt::OutputMap;
 use model_core::narmax::mcu::{NarxF32, NarxF32State, NarxQ15, NarxQ15State, MAX_PERIOD_MS};
 use model_core::narmax::{NarmaxError, NarmaxOutput, Predictor, Scaling};
 use model_core::observer::{Measurements, Observer, ObserverConfig, ObserverError};
-use model_core::scalar::Real;
 use model_core::{BenchError, BenchState, Scheme, Signals, WhiteBox};
 
 /// Step period, ms: one [`Controller::step`].
@@ -80,101 +79,6 @@ pub const SWITCH_RATE_MIN_PCT_PER_S: f32 = 50.0;
 
 /// A failed white-box step shows in status bit 1 (any alarm) for this long, ms.
 pub const MODEL_FAULT_SHOWN_MS: u32 = 2000;
-
-/// Holding register 20's default, the paper's static head as the core takes it: −c, mca.
-/// At it the lift probe learns the system's own ([`LiftProbe`]); at any other value the
-/// written one stands.
-pub const STATIC_HEAD_DEFAULT_MCA: f32 = -model_core::BenchParams::<f32>::PAPER.static_head_c_mca;
-/// Control periods a model-law loop stays within 2 % of its setpoint, its readings steady,
-/// before they count as a settled operating point (1 s): the readings at its half and at
-/// its end within [`LIFT_STEADY_FRACTION`] of each other (a flow meter damped longer than the
-/// pressure loop settles still moves). Single readings: the transmitters' noise is ≈ 0.1 %
-/// of the pressure, 0.4 % of the flow squared at 10 l/s.
-pub const LIFT_SETTLED_PERIODS: u16 = 200;
-/// How far a settled point's readings (the pressure, the flow squared) may move over half of
-/// [`LIFT_SETTLED_PERIODS`], as a fraction of themselves.
-pub const LIFT_STEADY_FRACTION: f32 = 0.01;
-/// The least flow squared a settled point needs, (l/s)² (1 l/s): under a lift no water
-/// moves, and the pressure then tells nothing of the system curve.
-pub const LIFT_MIN_FLOW_SQ: f32 = 1.0;
-/// The smallest spread of the squared flows of two settled points that gives a static head:
-/// this fraction of the larger (at less, noise would dominate the slope).
-pub const LIFT_MIN_SPREAD: f32 = 0.2;
-/// The static heads a pair may give, mca (as c: −10..=1, a lift of up to 10 mca); outside,
-/// the pair is no system curve of one valve (the valve moved between them).
-pub const LIFT_C_RANGE: (f32, f32) = (-10.0, 1.0);
-/// How far a pair's static head must be from the one held to be taken, mca: single
-/// readings put the pairs within ±0.015 mca of the paper's bench's c, and within it nothing
-/// changes (a lift under ≈ 0.35 mca is not learnt; it moves the loops' figures little).
-pub const LIFT_DEAD_BAND_MCA: f32 = 0.1;
-
-/// Learns the system's static head c (eq. (8), `p = k2² Q² − c` at the pressure
-/// transmitter) from two settled operating points of the loops either side of a setpoint
-/// move, the flow and the pressure both measured: the system curve through them, if the
-/// valve stayed. The observer cannot: at one point a lift and a valve give the same
-/// readings. Pump curves of another shape do not enter: the pair is the system's.
-#[derive(Debug, Clone, Copy, PartialEq)]
-struct LiftProbe {
-    /// The setpoint of the points being settled at, and the periods since its last check.
-    setpoint: f32,
-    settled: u16,
-    /// The pressure (mca) and the flow squared ((l/s)²) at the last check (NaN at the first
-    /// after a setpoint's change: the second check half a settling later is the first that
-    /// can hold).
-    mid: (f32, f32),
-    /// The last settled point: its setpoint, pressure and flow squared.
-    anchor: (f32, f32, f32),
-}
-
-impl LiftProbe {
-    const NEW: Self = Self {
-        setpoint: f32::NAN,
-        settled: 0,
-        mid: (f32::NAN, f32::NAN),
-        anchor: (f32::NAN, f32::NAN, f32::NAN),
-    };
-
-    /// One control period at `setpoint` with the readings `p` (mca) and `q` (l/s), `off` the
-    /// setpoint less the reading: the static head (mca) a pair of settled points gives, once,
-    /// as the loop settles at a setpoint other than the last settled point's. Settled, the
-    /// readings are checked every half of [`LIFT_SETTLED_PERIODS`] against the last check's
-    /// and taken as the anchor while they hold.
-    #[inline(never)]
-    fn period(&mut self, setpoint: f32, off: f32, p: f32, q: f32) -> Option<f32> {
-        const HALF: u16 = LIFT_SETTLED_PERIODS / 2;
-        if setpoint != self.setpoint || off.abs() > 0.02 * setpoint {
-            (self.setpoint, self.settled, self.mid) = (setpoint, 0, (f32::NAN, f32::NAN));
-            return None;
-        }
-        self.settled += 1;
-        if self.settled < HALF {
-            return None;
-        }
-        // Every half a settling from here on: the readings against the last check's.
-        self.settled = 0;
-        let q2 = q * q;
-        let (p1, q21) = core::mem::replace(&mut self.mid, (p, q2));
-        if !((p - p1).abs() <= LIFT_STEADY_FRACTION * p
-            && (q2 - q21).abs() <= LIFT_STEADY_FRACTION * q2
-            && q2 >= LIFT_MIN_FLOW_SQ)
-        {
-            // Still moving (a flow meter damped longer than the pressure loop settles), or
-            // no flow.
-            return None;
-        }
-        let (s0, p0, q20) = core::mem::replace(&mut self.anchor, (setpoint, p, q2));
-        let dq2 = q2 - q20;
-        let k = (p - p0) / dq2;
-        let c = k * q2 - p;
-        // (No anchor yet: NaN, and every comparison below false.)
-        (s0 != setpoint
-            && dq2.abs() > LIFT_MIN_SPREAD * Real::max(q2, q20)
-            && k > 0.0
-            && c >= LIFT_C_RANGE.0
-            && c <= LIFT_C_RANGE.1)
-            .then_some(c)
-    }
-}
 
 /// One 1 ms white-box step with the applied torque `u` (finite, 0..=100 %); `false` if it
 /// failed, which can only mean a diverged state: the step leaves it unchanged, so it would
@@ -519,10 +423,8 @@ pub struct Commands {
     pub control: ControlSettings,
     /// The system's static head as the models take it, mca (holding register 20,
     /// −10..=10): the pressure the system curve asks at no flow, `−c` of eq. (8) (the
-    /// paper's bench −0.252; a lift is positive). A change moves the observer's
-    /// ([`Observer::set_static_head`]) and the loops' model (bumpless); while it holds its
-    /// default ([`STATIC_HEAD_DEFAULT_MCA`]) the controller learns the system's own from the
-    /// loops' settled points (`LiftProbe`).
+    /// paper's bench −0.252; a lift is positive). A change moves the white-box bench's, the
+    /// observer's ([`Observer::set_static_head`]) and the loops' model (bumpless).
     pub static_head_mca: f32,
 }
 
@@ -685,10 +587,6 @@ pub struct Controller<const NP: usize, const HP: usize, const NF: usize, const H
     /// The loop's flags this step: acting on the observer's value, holding for lack of one.
     virtual_measurement: bool,
     control_held: bool,
-    /// Holding register 20 as last taken, mca ([`Commands::static_head_mca`]).
-    static_head_set: f32,
-    /// Learns the static head while register 20 holds its default.
-    lift: LiftProbe,
 }
 
 /// What the loops take from the observer's last estimate.
@@ -792,8 +690,6 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             },
             virtual_measurement: false,
             control_held: false,
-            static_head_set: STATIC_HEAD_DEFAULT_MCA,
-            lift: LiftProbe::NEW,
         };
         let s = c.whitebox.signals(&c.wb);
         c.pressure.reseed(Arithmetic::F32, 0.0, s.pressure_mca);
@@ -801,14 +697,15 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
         Ok(c)
     }
 
-    /// The observer and the loops take the static head `c_mca` (eq. (8)'s c, mca;
-    /// [`Commands::static_head_mca`] negated, or the one learnt): the observer's k2 moved so
-    /// the operating point stays, the loop's feedforward solved again at the next period, its
-    /// change taken by the integral. The white-box bench stays the paper's (its valve and
-    /// curves are too). A non-finite `c_mca` changes nothing.
+    /// The models take the static head `c_mca` (eq. (8)'s c, mca; [`Commands::static_head_mca`]
+    /// negated): the white-box bench at its nominal valve, the observer (its k2 moved so the
+    /// operating point stays), the loop's feedforward solved again at the next period, its
+    /// change taken by the integral. A non-finite `c_mca` changes nothing.
     #[inline(never)]
     fn take_static_head(&mut self, c_mca: f32) {
-        if self.observer.set_static_head(c_mca).is_ok() {
+        let k2 = self.whitebox.params().valve_k2;
+        if self.whitebox.set_load(k2, c_mca).is_ok() && self.observer.set_static_head(c_mca).is_ok()
+        {
             if let Some(r) = self.regulator.as_mut() {
                 r.model_changed();
             }
@@ -1141,25 +1038,10 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             0.0
         };
         r.set_speed_limit(limit, self.protect_speed_rpm);
-        // The observer's model: its static head is register 20's or the one learnt.
-        let model = &self.observer.config().params;
-        r.guard_speed(model, s);
-        let o = r.step(model, v.load, s, setpoint, measured);
+        r.guard_speed(self.whitebox.params(), s);
+        let o = r.step(self.whitebox.params(), v.load, s, setpoint, measured);
         r.watch_ring(s);
         self.measured_lag_s[k] = r.lag_s();
-        // The static head, learnt where register 20 holds its default, from the two
-        // transmitters (a setpoint move's pair of settled points).
-        if let (Some(p), Some(q)) = (pressure, flow) {
-            if s.law == ControlLaw::Model && self.static_head_set == STATIC_HEAD_DEFAULT_MCA {
-                if let Some(c) = self.lift.period(setpoint, setpoint - measured, p, q) {
-                    // (A pair spanning a valve's move is wrong; the next move's corrects it.)
-                    let now = self.observer.config().params.static_head_c_mca;
-                    if (c - now).abs() > LIFT_DEAD_BAND_MCA {
-                        self.take_static_head(c);
-                    }
-                }
-            }
-        }
         o.torque_pct
     }
 
@@ -1254,11 +1136,9 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
                 0
             };
         }
-        let h = inp.commands.static_head_mca;
-        if h != self.static_head_set {
-            // Written: it stands (and the probe starts again, for a return to the default).
-            (self.static_head_set, self.lift) = (h, LiftProbe::NEW);
-            self.take_static_head(-h);
+        let c = -inp.commands.static_head_mca;
+        if c != self.whitebox.params().static_head_c_mca {
+            self.take_static_head(c);
         }
         let control = self.control_due();
         let take_p = now.is_multiple_of(self.pressure.period_ms);
@@ -1436,65 +1316,6 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// Periods of `probe` settled at `setpoint` on the system curve `p = k q² − c`, the flow
-    /// reading `drift` × the curve's (1: settled), each period's drift compounding; the static
-    /// heads the probe gave.
-    fn settle_at(probe: &mut LiftProbe, setpoint: f32, k: f32, c: f32, drift: f32) -> Vec<f32> {
-        let q = ((setpoint + c) / k).sqrt();
-        let mut f = 1.0;
-        (0..3 * LIFT_SETTLED_PERIODS)
-            .filter_map(|_| {
-                f *= drift;
-                probe.period(setpoint, 0.0, setpoint, q * f)
-            })
-            .collect()
-    }
-
-    /// Two settled points of one system curve give its static head, once per move; a flow
-    /// reading still moving, two flows too close, no flow, or a pair of two valves give none;
-    /// a reading off its setpoint by more than 2 % starts the settling again.
-    #[test]
-    fn the_lift_probe_finds_the_static_head_of_two_settled_points() {
-        let (k, lift) = (0.0117, -1.5);
-        let mut probe = LiftProbe::NEW;
-        assert!(
-            settle_at(&mut probe, 2.0, k, lift, 1.0).is_empty(),
-            "no anchor yet"
-        );
-        let c = settle_at(&mut probe, 4.0, k, lift, 1.0);
-        assert_eq!(c.len(), 1, "{c:?}");
-        assert!((c[0] - lift).abs() < 1e-3, "{c:?}");
-        // The paper's own c, from a probe starting afresh.
-        let mut probe = LiftProbe::NEW;
-        settle_at(&mut probe, 2.0, 0.0117, 0.252, 1.0);
-        let c = settle_at(&mut probe, 3.0, 0.0117, 0.252, 1.0);
-        assert!(c.len() == 1 && (c[0] - 0.252).abs() < 1e-3, "{c:?}");
-        // The flow reading drifting 2 % per 100 periods (a damped meter): nothing.
-        let mut probe = LiftProbe::NEW;
-        settle_at(&mut probe, 2.0, k, lift, 1.0);
-        assert!(settle_at(&mut probe, 4.0, k, lift, 1.0002).is_empty());
-        // Two flows too close (4.0 and 4.1 mca: 5 % apart squared).
-        let mut probe = LiftProbe::NEW;
-        settle_at(&mut probe, 4.0, k, lift, 1.0);
-        assert!(settle_at(&mut probe, 4.1, k, lift, 1.0).is_empty());
-        // No flow (under 1 l/s): no anchor, so no pair after it either.
-        let mut probe = LiftProbe::NEW;
-        settle_at(&mut probe, 1.51, k, lift, 1.0);
-        assert!(settle_at(&mut probe, 4.0, k, lift, 1.0).is_empty());
-        // The valve closed between the points: more pressure at less flow.
-        let mut probe = LiftProbe::NEW;
-        settle_at(&mut probe, 2.0, k, lift, 1.0);
-        assert!(settle_at(&mut probe, 3.0, 4.0 * k, lift, 1.0).is_empty());
-        // Off by 3 % every 150 periods: never settled.
-        let mut probe = LiftProbe::NEW;
-        settle_at(&mut probe, 2.0, k, lift, 1.0);
-        let q = ((4.0 + lift) / k).sqrt();
-        let got = (0..3 * LIFT_SETTLED_PERIODS)
-            .filter_map(|i| probe.period(4.0, if i % 150 == 0 { 0.12 } else { 0.0 }, 4.0, q))
-            .count();
-        assert_eq!(got, 0);
-    }
 
     /// Regression (defect 5c of the protection issue): a white-box step that failed left the
     /// diverged state in place and the fault latched for good, "any alarm" with it.

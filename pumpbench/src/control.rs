@@ -547,23 +547,25 @@ pub struct Trace {
     pub tripped_s: f64,
 }
 
-/// A `--set REGISTER=VALUE`: the register a decimal u16, the value a decimal u16 or, for a
-/// signed register (20), an i16 (−32768..=−1 written as its two's complement, as a Modbus
+/// A `--set REGISTER=VALUE`: the register a decimal u16, the value a decimal u16 or, for
+/// the signed register 20, an i16 (−32768..=−1 written as its two's complement, as a Modbus
 /// master sends it).
 fn parse_setting(text: &str) -> Result<(u16, u16), Failure> {
     let bad = || {
         Failure::usage(format!(
             "--set {text}: must be REGISTER=VALUE, the register 0..=65535, the value \
-             -32768..=65535"
+             0..=65535 (register 20, signed: -32768..=32767)"
         ))
     };
     let (r, v) = text.split_once('=').ok_or_else(bad)?;
-    let v = v.trim();
+    let (register, v) = (r.trim().parse::<u16>().map_err(|_| bad())?, v.trim());
     let value = match v.parse::<u16>() {
         Ok(u) => u,
-        Err(_) => v.parse::<i16>().map_err(|_| bad())? as u16,
+        // Only a signed register takes a negative value (elsewhere −1 would land as 65 535).
+        Err(_) if register == 20 => v.parse::<i16>().map_err(|_| bad())? as u16,
+        Err(_) => return Err(bad()),
     };
-    Ok((r.trim().parse().map_err(|_| bad())?, value))
+    Ok((register, value))
 }
 
 fn refused(what: &str, e: controller::modbus::Exception) -> Failure {

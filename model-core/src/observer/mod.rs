@@ -39,8 +39,8 @@
 //!
 //! # Robustness
 //!
-//! A measurement that is not finite or is physically implausible (pressure below −c − 0.5
-//! mca or above 60 mca, flow below −0.5 l/s or above 60 l/s, speed below −50 or above 4000
+//! A measurement that is not finite or is physically implausible (pressure below
+//! min(−c, 0) − 0.5 mca or above 60 mca, flow below −0.5 l/s or above 60 l/s, speed below −50 or above 4000
 //! rpm: a transmitter at 2 mA, a NaN) is not used. An innovation whose normalised square
 //! exceeds [`ObserverConfig::gate_sigma`]² is rejected as an outlier, unless the channel has
 //! been rejected [`ObserverConfig::max_rejections`] times in a row: then the change is taken
@@ -194,10 +194,12 @@ impl<T: Real> Observer<T> {
     /// that the system curve still passes through the operating point now (the same
     /// pressure at the same flow): the state and its covariance stay, and the next steps
     /// find k2 from there. At no flow (or a curve that cannot pass there) k2 stays.
-    /// A non-finite `c_mca` is refused ([`ObserverError::Config`]); nothing changes then.
+    /// A non-finite `c_mca` is refused; nothing changes then.
     pub fn set_static_head(&mut self, c_mca: T) -> Result<(), ObserverError> {
         if !c_mca.is_finite() {
-            return Err(ObserverError::Config);
+            return Err(ObserverError::Model(crate::BenchError::InvalidParameter(
+                "the static head must be finite",
+            )));
         }
         let q = self.flow_now;
         if q > T::from_f64(0.1) {
