@@ -79,6 +79,9 @@ pub const SWITCH_RATE_MIN_PCT_PER_S: f32 = 50.0;
 
 /// A failed white-box step shows in status bit 1 (any alarm) for this long, ms.
 pub const MODEL_FAULT_SHOWN_MS: u32 = 2000;
+/// The largest static head the models take, either sign, mca ([`Commands::static_head_mca`];
+/// holding register 20 in 0.001 mca).
+pub const STATIC_HEAD_MAX_MCA: f32 = 10.0;
 
 /// One 1 ms white-box step with the applied torque `u` (finite, 0..=100 %); `false` if it
 /// failed, which can only mean a diverged state: the step leaves it unchanged, so it would
@@ -422,9 +425,11 @@ pub struct Commands {
     /// The pressure and flow loops' settings (holding registers 8..=18).
     pub control: ControlSettings,
     /// The system's static head as the models take it, mca (holding register 20,
-    /// −10..=10): the pressure the system curve asks at no flow, `−c` of eq. (8) (the
-    /// paper's bench −0.252; a lift is positive). A change moves the white-box bench's, the
-    /// observer's ([`Observer::set_static_head`]) and the loops' model (bumpless).
+    /// ±[`STATIC_HEAD_MAX_MCA`]): the pressure the system curve asks at no flow, `−c` of
+    /// eq. (8) (the paper's bench −0.252; a lift is positive). A change moves the white-box
+    /// bench's, the observer's ([`Observer::set_static_head`]) and the loops' model
+    /// (bumpless); a value outside the range (or not finite) is refused, the models keep
+    /// theirs.
     pub static_head_mca: f32,
 }
 
@@ -700,9 +705,14 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
     /// The models take the static head `c_mca` (eq. (8)'s c, mca; [`Commands::static_head_mca`]
     /// negated): the white-box bench at its nominal valve, the observer (its k2 moved so the
     /// operating point stays), the loop's feedforward solved again at the next period, its
-    /// change taken by the integral. A non-finite `c_mca` changes nothing.
+    /// change taken by the integral. A `c_mca` outside ±[`STATIC_HEAD_MAX_MCA`] (or NaN)
+    /// changes nothing.
     #[inline(never)]
     fn take_static_head(&mut self, c_mca: f32) {
+        // (NaN passes here: the white-box bench refuses it.)
+        if c_mca.abs() > STATIC_HEAD_MAX_MCA {
+            return;
+        }
         let k2 = self.whitebox.params().valve_k2;
         if self.whitebox.set_load(k2, c_mca).is_ok() && self.observer.set_static_head(c_mca).is_ok()
         {
@@ -1331,6 +1341,31 @@ mod tests {
         );
         assert_eq!(s.speed_rpm, good.speed_rpm, "restarted at the steady state");
         assert!(step_or_restart(&wb, &mut s, 50.0), "and steps again");
+    }
+
+    /// A static head outside ±[`STATIC_HEAD_MAX_MCA`] or not finite, from an API caller (SCADA
+    /// refuses it before), leaves the models as they were; one inside moves them.
+    #[test]
+    fn a_static_head_out_of_range_is_refused() {
+        use pump_models::{flow, pressure};
+        let p = NarmaxModel::new(&pressure::F32, &pressure::Q15, 50).unwrap();
+        let q = NarmaxModel::new(&flow::F32, &flow::Q15, 100).unwrap();
+        let mut c = Controller::new(&Config::bench(), p, q).unwrap();
+        let held = |c: &Controller<_, _, _, _>| {
+            (
+                c.whitebox.params().static_head_c_mca,
+                c.observer().config().params.static_head_c_mca,
+            )
+        };
+        let paper = held(&c);
+        for bad in [10.001, -10.5, 1e6, f32::NAN, f32::INFINITY] {
+            c.take_static_head(bad);
+            assert_eq!(held(&c), paper, "{bad} mca");
+        }
+        for good in [-STATIC_HEAD_MAX_MCA, 1.5, STATIC_HEAD_MAX_MCA] {
+            c.take_static_head(good);
+            assert_eq!(held(&c), (good, good));
+        }
     }
 
     const S: Scaling<f32> = Scaling {

@@ -88,7 +88,10 @@ pub const INPUT_REGISTERS: usize = 30;
 pub const HOLDING_REGISTERS: usize = 21;
 /// Holding register 20: the static heads accepted, 0.001 mca (the register read as an
 /// `i16`).
-pub const STATIC_HEAD_RANGE: core::ops::RangeInclusive<i16> = -10_000..=10_000;
+pub const STATIC_HEAD_RANGE: core::ops::RangeInclusive<i16> = {
+    let max = (crate::control::STATIC_HEAD_MAX_MCA * 1000.0) as i16;
+    -max..=max
+};
 /// Holding register 20's default: the paper's bench, `−c` (−0.252 mca) in 0.001 mca.
 pub const STATIC_HEAD_DEFAULT: i16 = (-model_core::params::PAPER_C_MCA * 1000.0 - 0.5) as i16;
 /// Largest setpoint filter and transmitter time constant (holding registers 13, 15, 16), ms.

@@ -16,6 +16,23 @@ pub fn report(ef: Option<&ExceptionFrame>) {
     }
 }
 
+/// Logs a panic once, with its source file and line (a panic while logging it, or on
+/// another path after it, logs nothing more), interrupts off: each board's `#[panic_handler]`
+/// calls it, then ends its own way (QEMU: exit with status 1; the Nucleo: `udf`, into the
+/// HardFault handler that takes the torque reference off and resets). The message is not
+/// formatted: that links `core::fmt` (≈ 1.4 KB of the 64 KiB image) for a path that only a
+/// bug takes, and the file and line find it.
+#[cfg(feature = "defmt")]
+pub fn report_panic(info: &core::panic::PanicInfo) {
+    use core::sync::atomic::{AtomicBool, Ordering};
+    static PANICKED: AtomicBool = AtomicBool::new(false);
+    cortex_m::interrupt::disable();
+    if !PANICKED.swap(true, Ordering::Relaxed) {
+        let (file, line) = info.location().map_or(("?", 0), |l| (l.file(), l.line()));
+        defmt::error!("panic at {=str}:{=u32}", file, line);
+    }
+}
+
 /// Defines the `HardFault` handler: a trampoline that survives a stack overflow, then
 /// `$handler`, a `fn(Option<&`[`ExceptionFrame`]`>) -> !` of the board (`None` after
 /// a stack overflow, when the stacked frame is lost).

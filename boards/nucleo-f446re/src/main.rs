@@ -52,7 +52,7 @@
 //! (SWD), PC13 (user button), PH0/PH1 (HSE from the ST-LINK MCO).
 //!
 //! # Faults
-//! A HardFault (a panic ends in one: panic-probe logs it, then `udf`) logs the faulting PC,
+//! A HardFault (a panic ends in one: its file and line logged, then `udf`) logs the faulting PC,
 //! switches the torque reference off (the DAC channel disabled: the amplifier's pull-down
 //! takes the VFD's input to 0 V) and resets the MCU, which starts stopped (mode 0). A control
 //! task that stops running is reset by the independent watchdog (≈ 68-190 ms).
@@ -63,7 +63,6 @@
 #![no_main]
 
 use defmt_rtt as _;
-use panic_probe as _;
 use stm32f4xx_hal::pac;
 
 /// Modbus RTU line speed, bit/s (both links).
@@ -107,6 +106,15 @@ fn hard_fault(ef: Option<&board_common::fault::ExceptionFrame>) -> ! {
     board_common::fault::report(ef);
     defmt::error!("torque reference off, reset");
     cortex_m::peripheral::SCB::sys_reset()
+}
+
+/// A panic logs its file and line ([`board_common::fault::report_panic`]: not its message,
+/// whose formatting would link `core::fmt`, ≈ 1.4 KB), then ends in the HardFault handler
+/// (torque reference off, reset).
+#[panic_handler]
+fn panic(info: &core::panic::PanicInfo) -> ! {
+    board_common::fault::report_panic(info);
+    cortex_m::asm::udf()
 }
 
 /// The timing margins (DWT cycles at 180 MHz).
@@ -223,7 +231,7 @@ mod app {
         let dp = cx.device;
         let mut cp = cx.core;
         let config = Config::bench();
-        // A configuration the controller refuses is a build-time mistake: panic-probe logs
+        // A configuration the controller refuses is a build-time mistake: the panic handler logs
         // it and the HardFault handler resets with the torque reference off.
         let core = board_common::build_controller(&config).unwrap_or_else(|_| panic!("controller"));
         let scada = ScadaLink::new(&config).unwrap_or_else(|_| panic!("SCADA"));

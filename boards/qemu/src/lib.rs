@@ -44,18 +44,11 @@ fn hard_fault(ef: Option<&board_common::fault::ExceptionFrame>) -> ! {
     exit(false)
 }
 
-/// A panic is logged once, with its source location, and exits QEMU with status 1. The
-/// message is not formatted: that links `core::fmt` (≈ 1.4 KB of the 64 KiB image) for a path
-/// that only a bug takes, and the file and line find it.
+/// A panic is logged once, with its source location
+/// ([`board_common::fault::report_panic`]), and exits QEMU with status 1.
 #[panic_handler]
 fn panic(info: &core::panic::PanicInfo) -> ! {
-    use core::sync::atomic::{AtomicBool, Ordering};
-    static PANICKED: AtomicBool = AtomicBool::new(false);
-    cortex_m::interrupt::disable();
-    if !PANICKED.swap(true, Ordering::Relaxed) {
-        let (file, line) = info.location().map_or(("?", 0), |l| (l.file(), l.line()));
-        defmt::error!("panic at {=str}:{=u32}", file, line);
-    }
+    board_common::fault::report_panic(info);
     exit(false)
 }
 

@@ -192,9 +192,11 @@ impl<T: Real> Observer<T> {
     /// Takes the system curve's static head c (mca, eq. (8): `Hs = k2² Q² − c`; the paper's
     /// 0.252, a lift is c < 0), as commissioning writes it. The valve's k2 moves with it so
     /// that the system curve still passes through the operating point now (the same
-    /// pressure at the same flow): the state and its covariance stay, and the next steps
-    /// find k2 from there. At no flow (or a curve that cannot pass there) k2 stays.
-    /// A non-finite `c_mca` is refused; nothing changes then.
+    /// pressure at the same flow), within the configuration's `k2_range`; k2's row and
+    /// column of the covariance are carried through the move (its slope `k2 / k2'`), the rest
+    /// of the state and covariance stay, and the next steps find k2 from there. At no flow
+    /// (or a curve that cannot pass there) k2 stays. A non-finite `c_mca` is refused;
+    /// nothing changes then.
     pub fn set_static_head(&mut self, c_mca: T) -> Result<(), ObserverError> {
         if !c_mca.is_finite() {
             return Err(ObserverError::Model(crate::BenchError::InvalidParameter(
@@ -206,7 +208,16 @@ impl<T: Real> Observer<T> {
             let k2 = self.x[K2];
             let k2_sq = k2 * k2 + (c_mca - self.cfg.params.static_head_c_mca) / (q * q);
             if k2_sq > T::ZERO {
-                self.x[K2] = k2_sq.sqrt();
+                let r = &self.cfg.k2_range;
+                let moved = k2_sq.sqrt().max(r.0).min(r.1);
+                // k2' = √(k2² + Δc/Q²): dk2'/dk2 = k2/k2' (a clamped k2' takes the same
+                // slope; the next updates find it). P' = J P Jᵀ, J = diag(1, …, k2/k2', …).
+                let f = k2 / moved;
+                for i in 0..STATES {
+                    self.p[K2][i] = self.p[K2][i] * f;
+                    self.p[i][K2] = self.p[i][K2] * f;
+                }
+                self.x[K2] = moved;
             }
         }
         self.cfg.params.static_head_c_mca = c_mca;

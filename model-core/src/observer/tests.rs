@@ -244,6 +244,47 @@ fn a_static_head_commissioned_moves_k2_onto_the_lift() {
 }
 
 #[test]
+fn a_static_head_moves_k2_within_its_range_and_its_covariance_with_it() {
+    let rows = record(5, 20.0, 0.0, &[]);
+    let mut o = Observer::<f64>::new(ObserverConfig::paper(), 20.0).unwrap();
+    for (i, r) in rows.iter().enumerate() {
+        let m = Measurements {
+            pressure_mca: Some(r.p_meas),
+            flow_lps: (i % 2 == 1).then_some(r.q_meas),
+            speed_rpm: Some(r.w_meas),
+        };
+        o.step(0.05, r.torque_pct, &m).unwrap();
+    }
+    let q = o.estimate_now().flow_lps;
+    assert!(q > 1.0, "{q} l/s");
+    let (k2, p) = (o.state()[K2], *o.covariance());
+    // A lift that halves k2²: k2' = √(k2² + Δc / Q²), the covariance's k2 row and column
+    // × k2/k2'.
+    let mut told = o.clone();
+    told.set_static_head(PAPER_C_MCA - 0.5 * k2 * k2 * q * q)
+        .unwrap();
+    let moved = told.state()[K2];
+    let want = k2 / 2f64.sqrt();
+    assert!((moved / want - 1.0).abs() < 1e-9, "{moved} {want}");
+    let f = k2 / moved;
+    let pt = told.covariance();
+    for i in 0..STATES {
+        for j in 0..STATES {
+            let g = if i == K2 { f } else { 1.0 } * if j == K2 { f } else { 1.0 };
+            assert!(
+                (pt[i][j] - p[i][j] * g).abs() <= 1e-12 * p[i][j].abs(),
+                "{i} {j}"
+            );
+        }
+    }
+    // A static head that would need k2 past its range (c raised by 2 × Q²) stops at the range.
+    let hi = o.config().k2_range.1;
+    o.set_static_head(PAPER_C_MCA + 2.0 * q * q).unwrap();
+    assert_eq!(o.state()[K2], hi);
+    assert!(o.covariance()[K2][K2] < p[K2][K2]);
+}
+
+#[test]
 fn flow_and_speed_without_their_sensors() {
     let steps = [(30.0, 1.3), (75.0, 0.7)];
     for e in [0.03, -0.04] {
