@@ -161,7 +161,7 @@ pub struct ControlArgs {
     #[arg(long, conflicts_with_all = [
         "scenario", "controller", "targets", "output", "plot", "set", "seed", "hold_s",
         "flow_lag_ms", "curve_error", "curve_shape", "water_inertia", "drive_lag_ms", "rotor_inertia",
-        "pressure_lag_ms", "speed_lag_ms", "static_head",
+        "pressure_lag_ms", "speed_lag_ms", "static_head", "flow_update_ms",
     ])]
     pub plant_stdio: bool,
     /// The law(s) to run.
@@ -559,6 +559,16 @@ pub struct PlantArgs {
         allow_hyphen_values = true
     )]
     pub speed_lag_ms: String,
+    /// The flow meter's update period, ms (0..2000; 0: every step): between updates it
+    /// holds its last reading, as a meter that computes its flow over a window, or is read
+    /// over a bus, does.
+    #[arg(
+        long,
+        value_name = "MS",
+        default_value = "0",
+        allow_hyphen_values = true
+    )]
+    pub flow_update_ms: String,
     /// The TRUE system's static head, mca (-1..5): its pressure at no flow, -c of the
     /// valve's equation (the paper's bench -0.252, its transmitter above the tank's level;
     /// a lift, the outlet above the suction's level, is positive). Under it the pump moves

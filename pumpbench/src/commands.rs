@@ -212,6 +212,8 @@ pub fn plant_options(
             .map_err(Failure::usage)?,
         speed_lag_s: plant::parse_lag_ms("--speed-lag-ms", &a.speed_lag_ms)
             .map_err(Failure::usage)?,
+        flow_update_s: plant::parse_lag_ms("--flow-update-ms", &a.flow_update_ms)
+            .map_err(Failure::usage)?,
         static_head_mca: plant::parse_static_head(&a.static_head).map_err(Failure::usage)?,
     })
 }

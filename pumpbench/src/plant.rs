@@ -425,6 +425,10 @@ pub struct PlantOptions {
     /// The drive's speed reading's first-order lag, s (0: the rotor's speed as it is; a
     /// drive's filtered speed estimate lags it).
     pub speed_lag_s: f64,
+    /// The flow meter's update period, s (0: every step): between updates its output holds
+    /// the last (lagged) value, as a meter that computes its flow over a window, or is read
+    /// over a bus, does.
+    pub flow_update_s: f64,
     /// The system curve's pressure at no flow, mca ([`STATIC_HEAD_RANGE_MCA`]): `−c` of eq.
     /// (8), the paper's −0.252; a lift (the outlet above the suction's level) is positive.
     /// Under it the pump moves no water and the transmitter reads it (a check valve holds
@@ -465,6 +469,7 @@ impl PlantOptions {
             flow_lag_s: FLOW.tau_s,
             pressure_lag_s: PRESSURE.tau_s,
             speed_lag_s: SPEED.tau_s,
+            flow_update_s: 0.0,
             static_head_mca: -PAPER_C_MCA,
         }
     }
@@ -543,6 +548,11 @@ pub struct Plant {
     speed: Transmitter,
     /// The transmitters' lagged values: speed, flow, pressure.
     seen: (f64, f64, f64),
+    /// The flow meter's update period, s (0: every step), the value it shows and the time
+    /// since it last updated it, s.
+    flow_update_s: f64,
+    flow_shown: f64,
+    flow_age_s: f64,
     rng: SplitMix64,
     sensors: SensorState,
 }
@@ -580,6 +590,9 @@ impl Plant {
                 ..SPEED
             },
             seen: (0.0, 0.0, 0.0),
+            flow_update_s: o.flow_update_s,
+            flow_shown: 0.0,
+            flow_age_s: 0.0,
             rng: SplitMix64::new(o.seed),
             sensors: SensorState::OK,
         };
@@ -590,6 +603,7 @@ impl Plant {
             .map_err(|e| PlantError::Model(e.to_string()))?;
         plant.rich = (o.dynamics != Dynamics::NONE).then(|| Rich::at(&plant.bench, &plant.state));
         plant.seen = plant.now();
+        plant.flow_shown = plant.seen.1;
         Ok(plant)
     }
 
@@ -662,6 +676,17 @@ impl Plant {
         self.pressure.lag(p, p_now, h_s);
         self.flow.lag(q, q_now, h_s);
         self.speed.lag(s, w_now, h_s);
+        // The meter's output: the lagged flow now, or at its last update (a step's rounding
+        // of 1e-9 s: 200 steps of 1 ms are one 0.2 s period).
+        self.flow_age_s += h_s;
+        if self.flow_age_s + 1e-9 >= self.flow_update_s {
+            self.flow_age_s = if self.flow_update_s > 0.0 {
+                (self.flow_age_s - self.flow_update_s).max(0.0)
+            } else {
+                0.0
+            };
+            self.flow_shown = *q;
+        }
         Ok(())
     }
 
@@ -669,7 +694,8 @@ impl Plant {
     /// value with its noise, through its ADC and read back on its span's line (not clamped to
     /// the span, as a logger records it). Three draws of the noise, in that order.
     pub fn readings(&mut self) -> (f64, f64, f64) {
-        let (s, q, p) = self.seen;
+        let (s, _, p) = self.seen;
+        let q = self.flow_shown;
         (
             self.speed.read(s, &mut self.rng),
             self.flow.read(q, &mut self.rng),
@@ -683,7 +709,8 @@ impl Plant {
     /// delivers, status 0), `None` while the link is cut. The same three draws of the noise
     /// as [`Self::readings`], whatever the sensors' state.
     pub fn frame(&mut self) -> PlantFrame {
-        let (s, q, p) = self.seen;
+        let (s, _, p) = self.seen;
+        let q = self.flow_shown;
         let speed = self.speed.noisy(s, &mut self.rng);
         let flow = self.flow.noisy(q, &mut self.rng);
         let pressure = self.pressure.noisy(p, &mut self.rng);
@@ -981,6 +1008,35 @@ mod tests {
         assert!((frac - (1.0 - (-1.0f64).exp())).abs() < 1e-9, "{frac}");
         let d = p.frame().drive.unwrap();
         assert_eq!(d.torque_pct, p.truth().torque_pct as f32);
+    }
+
+    /// A flow meter updating every 20 ms shows the lagged flow of its last update: its
+    /// readings change once in 20 steps of 1 ms while the flow moves, and at each update
+    /// equal the continuous meter's of the same plant (same lag, same noise draws).
+    #[test]
+    fn a_flow_meter_updating_every_period_holds_its_reading_between() {
+        let o = PlantOptions::with_seed(1);
+        let held = PlantOptions {
+            flow_update_s: 0.02,
+            ..o
+        };
+        let (mut a, mut b) = (
+            Plant::new(&o, 1.0, 30.0).unwrap(),
+            Plant::new(&held, 1.0, 30.0).unwrap(),
+        );
+        let (mut changes, mut last) = (0, b.seen.1);
+        for k in 1..=200 {
+            a.advance(90.0, 1e-3).unwrap();
+            b.advance(90.0, 1e-3).unwrap();
+            assert_eq!(a.seen, b.seen, "the lagged values are the same");
+            if b.flow_shown != last {
+                changes += 1;
+                last = b.flow_shown;
+                assert_eq!(k % 20, 0, "an update at step {k}");
+                assert_eq!(b.flow_shown, a.flow_shown);
+            }
+        }
+        assert_eq!(changes, 10);
     }
 
     /// With a speed reading lag the drive's speed reading follows a speed step through it:
