@@ -14,7 +14,7 @@ Each plant draws, from one seeded generator (the same seed, the same plants):
 
 Usage:
   python3 tools/random_plants.py --bin target/release/pumpbench --plants 200 --seed 3 \
-      [--jobs 2] [--out runs.tsv] [--against older.tsv] [--speed-lag-ms 50] [--lift 2 [--tell]]
+      [--jobs 2] [--out runs.tsv] [--against older.tsv] [--speed-lag-ms 50] [--flow-update-ms 200] [--lift 2 [--tell]]
 
 Prints the totals (figure targets met by each law, comparisons the model law won, trips,
 NaN or torque-limit failures), the model law's misses per scenario and figure, and with
@@ -111,6 +111,9 @@ def main():
     ap.add_argument("--speed-lag-ms", type=float, default=0.0,
                     help="every plant's drive reads its speed through this lag, ms (the same "
                          "plants otherwise; 0: none, the speed as it is)")
+    ap.add_argument("--flow-update-ms", type=float, default=0.0,
+                    help="every plant's flow meter updates its output every MS ms and holds it "
+                         "between (the same plants otherwise; 0: every step)")
     ap.add_argument("--lift", type=float, default=0.0,
                     help="every plant has a static lift drawn in 0..LIFT mca (pumpbench's "
                          "--static-head; the same plants otherwise; 0: the paper's -0.252)")
@@ -127,6 +130,9 @@ def main():
     if a.speed_lag_ms > 0:
         for p in plants:
             p["speed-lag-ms"] = a.speed_lag_ms
+    if a.flow_update_ms > 0:
+        for p in plants:
+            p["flow-update-ms"] = a.flow_update_ms
     if a.lift > 0:
         lifts = random.Random(a.seed ^ 0x11F7)
         for p in plants:
