@@ -57,11 +57,9 @@ pub const LOG_EVERY_MS: u32 = 1000;
 /// the observer's speed.
 pub const DRIVE_READING_FRESH_MS: u32 = 100;
 
-/// The observer's pressure stands in for a pressure transmitter in fault (mode 3) while its
-/// standard deviation is at most this fraction of the setpoint (5 %; and at least
-/// [`VIRTUAL_PRESSURE_MIN_SD_MCA`]), and goes on standing in up to
-/// [`VIRTUAL_PRESSURE_HOLD_FACTOR`] times that: beyond, the loop holds its last torque and
-/// alarms, and starts again from the plant as it stands once the σ is back under it. Measured
+/// The observer's pressure stands in for a pressure transmitter in fault (mode 3) only while
+/// its standard deviation is at most this fraction of the setpoint (5 %; and at least
+/// [`VIRTUAL_PRESSURE_MIN_SD_MCA`]): else the loop holds its last torque and alarms. Measured
 /// with `pumpbench control` (the transmitter lost at 3 mca, then the valve ×1.3;
 /// docs/control.md): right after the valve step the observer's σ rises over it for ≈ 0.5 s
 /// while its k2 converges; at 0.05 mca (1.7 %) it stayed over it for seconds, and the held
@@ -74,13 +72,6 @@ pub const VIRTUAL_PRESSURE_MAX_SD_FRACTION: f32 = 0.05;
 /// of the bench's 0..10 mca loop): at a setpoint near 0 the observer is still usable.
 pub const VIRTUAL_PRESSURE_MIN_SD_MCA: f32 = 0.01;
 
-/// Once the loop acts on the observer's pressure, it holds only past this many times
-/// [`VIRTUAL_PRESSURE_MAX_SD_FRACTION`]'s limit (a hysteresis: it trusts the estimate again
-/// at the limit itself), and not while its reference moves (it holds again once arrived).
-/// The loop's own move after a hold raises the σ, and a hold then froze the torque mid-move:
-/// a hostile review's plant cycled between holding and acting every 0.4-0.6 s, its torque
-/// 18 ↔ 59 % and its pressure 2.8 ↔ 4.7 mca at 3, for 5 s (docs/control.md, Faults).
-pub const VIRTUAL_PRESSURE_HOLD_FACTOR: f32 = 2.0;
 /// A mode switch (and the VFD link's return) moves the torque at the loop's rate (holding
 /// register 12) or at this one, %/s, the faster: a stop takes at most 2 s from 100 %, whatever
 /// the loop's rate.
@@ -998,8 +989,6 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
         };
         let s = &inp.commands.control;
         let v = self.view;
-        // Out of a hold (the pressure lost, the observer's not trustworthy) this period.
-        let mut restart = false;
         let (controlled, setpoint, measured) = match mode {
             Mode::Flow => {
                 // The virtual flow meter: the observer's flow when the meter is in fault.
@@ -1013,18 +1002,9 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             _ => {
                 let limit = (VIRTUAL_PRESSURE_MAX_SD_FRACTION * s.pressure_setpoint_mca.abs())
                     .max(VIRTUAL_PRESSURE_MIN_SD_MCA);
-                let virtual_ok = v.pressure_sd_mca
-                    <= if self.control_held {
-                        limit
-                    } else {
-                        VIRTUAL_PRESSURE_HOLD_FACTOR * limit
-                    };
-                // (A loop that moves after a hold does not hold again until it has arrived.)
-                let moving = self.regulator.as_ref().is_some_and(|r| r.moving());
-                let held = pressure.is_none() && !virtual_ok && (self.control_held || !moving);
-                restart = self.control_held && !held && s.law == ControlLaw::Model;
+                let virtual_ok = v.pressure_sd_mca <= limit;
                 self.virtual_measurement = pressure.is_none() && virtual_ok;
-                self.control_held = held;
+                self.control_held = pressure.is_none() && !virtual_ok;
                 let measured =
                     pressure.unwrap_or(if virtual_ok { v.pressure_mca } else { f32::NAN });
                 (Controlled::Pressure, s.pressure_setpoint_mca, measured)
@@ -1041,15 +1021,6 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
         if core::mem::take(&mut self.resume) {
             if let Some(r) = self.regulator.as_mut() {
                 r.resume(measured, applied);
-            }
-        }
-        if restart {
-            // After a hold the load may have moved under the torque held (a valve step: the
-            // hold's usual cause): the loop starts again from the plant as it stands, the
-            // feedforward at the load estimated now (a review: the load's change taken into
-            // the integral, as between periods, kept the held torque and dove from it).
-            if let Some(r) = self.regulator.as_mut() {
-                r.restart(measured, applied);
             }
         }
         let k = usize::from(controlled == Controlled::Flow);

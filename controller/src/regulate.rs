@@ -1007,8 +1007,6 @@ impl Regulator {
     /// VFD link was down): the integrator as it was frozen (the model's error it had
     /// learnt), the reference restarted at the value `measured` now, the torque from the one
     /// applied.
-    // (Out of line: inlined at its two calls it cost the QEMU image 408 B, over its budget.)
-    #[inline(never)]
     pub fn resume(&mut self, measured: f32, applied_pct: f32) {
         if measured.is_finite() {
             self.reference = measured;
@@ -1024,16 +1022,6 @@ impl Regulator {
         if applied_pct.is_finite() {
             self.last_pct = applied_pct;
         }
-    }
-
-    /// Starts again from the plant as it stands, as a switch into the loop does: [`resume`]'s
-    /// reference and torque, and the integral bumpless at the next period (what the
-    /// feedforward at the load estimated then leaves of the torque applied).
-    ///
-    /// [`resume`]: Regulator::resume
-    pub fn restart(&mut self, measured: f32, applied_pct: f32) {
-        self.resume(measured, applied_pct);
-        self.fresh = true;
     }
 
     /// One control period: the torque for `setpoint` given `measured`, on the bench `bench`
