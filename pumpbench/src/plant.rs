@@ -185,6 +185,21 @@ impl Dynamics {
     };
 }
 
+/// `text` as a finite number within `lo..=hi`, or a one-line message naming `option` that
+/// shows the value as it was typed (3000, not 3e3) and the range in `unit` (" ms").
+fn in_range(option: &str, text: &str, (lo, hi): (f64, f64), unit: &str) -> Result<f64, String> {
+    let v = finite(option, text)?;
+    if (lo..=hi).contains(&v) {
+        Ok(v)
+    } else {
+        // The limits in plain notation (`Short` would write 2e3).
+        Err(format!(
+            "{option} {}: must be within {lo}..{hi}{unit}",
+            shown(text.trim())
+        ))
+    }
+}
+
 /// `text` as a finite number, or a one-line message naming `option`.
 fn finite(option: &str, text: &str) -> Result<f64, String> {
     let t = text.trim();
@@ -216,18 +231,7 @@ pub fn parse_curve_shape(text: &str) -> Result<(f64, f64), String> {
 /// `PCT` as `(PCT, −PCT)` or `H,T` as `(H, T)`, each finite and within ±`max_pct`; the
 /// message names `option`.
 fn parse_pct_pair(option: &str, text: &str, max_pct: f64) -> Result<(f64, f64), String> {
-    let one = |t: &str| -> Result<f64, String> {
-        let pct = finite(option, t)?;
-        if pct.abs() <= max_pct {
-            Ok(pct)
-        } else {
-            Err(format!(
-                "{option} {}: must be within -{m}..{m} %",
-                Short(pct),
-                m = Short(max_pct)
-            ))
-        }
-    };
+    let one = |t: &str| in_range(option, t, (-max_pct, max_pct), " %");
     match text.split_once(',') {
         None => {
             let pct = one(text)?;
@@ -249,44 +253,27 @@ pub fn parse_water_inertia(text: &str) -> Result<f64, String> {
         Ok(l.abs())
     } else {
         Err(format!(
-            "--water-inertia {}: must be 0 or within {}..{} mca·s²/l",
-            Short(l),
-            Short(INERTIA_MIN),
-            Short(INERTIA_MAX)
+            "--water-inertia {}: must be 0 or within {INERTIA_MIN}..{INERTIA_MAX} mca·s²/l",
+            shown(text.trim())
         ))
     }
 }
 
 /// Parses `--rotor-inertia F` (× the paper's J): finite, within [`ROTOR_INERTIA_RANGE`].
 pub fn parse_rotor_inertia(text: &str) -> Result<f64, String> {
-    let f = finite("--rotor-inertia", text)?;
-    let (lo, hi) = ROTOR_INERTIA_RANGE;
-    if (lo..=hi).contains(&f) {
-        Ok(f)
-    } else {
-        Err(format!(
-            "--rotor-inertia {}: must be within {}..{} × the paper's",
-            Short(f),
-            Short(lo),
-            Short(hi)
-        ))
-    }
+    in_range(
+        "--rotor-inertia",
+        text,
+        ROTOR_INERTIA_RANGE,
+        " × the paper's",
+    )
 }
 
 /// Parses a transmitter lag in ms (`option` names it in the message): finite, within
 /// 0..=[`LAG_MAX_MS`]. Returns seconds.
 pub fn parse_lag_ms(option: &str, text: &str) -> Result<f64, String> {
-    let ms = finite(option, text)?;
-    if (0.0..=LAG_MAX_MS).contains(&ms) {
-        // A division, so 40 ms is exactly the 0.040 s of the default.
-        Ok(ms / 1000.0)
-    } else {
-        // The limit in plain notation (Short would write 2e3).
-        Err(format!(
-            "{option} {}: must be within 0..{LAG_MAX_MS} ms",
-            Short(ms)
-        ))
-    }
+    // A division, so 40 ms is exactly the 0.040 s of the default.
+    Ok(in_range(option, text, (0.0, LAG_MAX_MS), " ms")? / 1000.0)
 }
 
 /// The true bench for a curve error: the paper's parameters with every α (pump head F_H,
@@ -443,18 +430,7 @@ pub const STATIC_HEAD_RANGE_MCA: (f64, f64) = (-1.0, 5.0);
 
 /// Parses `--static-head MCA`: finite, within [`STATIC_HEAD_RANGE_MCA`].
 pub fn parse_static_head(text: &str) -> Result<f64, String> {
-    let h = finite("--static-head", text)?;
-    let (lo, hi) = STATIC_HEAD_RANGE_MCA;
-    if (lo..=hi).contains(&h) {
-        Ok(h)
-    } else {
-        Err(format!(
-            "--static-head {}: must be within {}..{} mca",
-            Short(h),
-            Short(lo),
-            Short(hi)
-        ))
-    }
+    in_range("--static-head", text, STATIC_HEAD_RANGE_MCA, " mca")
 }
 
 impl PlantOptions {

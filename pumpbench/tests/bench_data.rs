@@ -366,7 +366,7 @@ fn bad_options_are_refused_with_one_line_exit_2_and_no_output() {
         (
             "--water-inertia",
             "-0.1",
-            "--water-inertia -0.1: must be 0 or within 1e-3..10 mca·s²/l",
+            "--water-inertia -0.1: must be 0 or within 0.001..10 mca·s²/l",
         ),
         ("--water-inertia", "1e-4", "--water-inertia 1e-4: must be 0"),
         ("--water-inertia", "10.5", "--water-inertia 10.5: must be 0"),
@@ -389,6 +389,17 @@ fn bad_options_are_refused_with_one_line_exit_2_and_no_output() {
             "--drive-lag-ms",
             "2001",
             "--drive-lag-ms 2001: must be within",
+        ),
+        // The value as typed, not in its shortest form (3e3).
+        (
+            "--drive-lag-ms",
+            "3000",
+            "--drive-lag-ms 3000: must be within 0..2000 ms",
+        ),
+        (
+            "--flow-update-ms",
+            " 3000",
+            "--flow-update-ms 3000: must be within 0..2000 ms",
         ),
         (
             "--drive-lag-ms",
