@@ -143,9 +143,13 @@ fn the_vfd_link_cut_gives_0_pct_and_freezes_the_loop_which_restarts_without_a_st
     let s = status(&mut b);
     assert!(!s.in_control && !s.vfd_link_ok);
     let integral = input(&mut b, 29);
+    // The observer waits too (the pump does not get the torque the model would be told):
+    // its valve k2 (input register 20) stays, however the coasting bench reads.
+    let k2 = input(&mut b, 20);
     let t = torques(&mut b, 1000);
     assert!(t.iter().all(|&u| u == 0.0), "0 % while the link is down");
     assert_eq!(input(&mut b, 29), integral, "the integrator frozen");
+    assert_eq!(input(&mut b, 20), k2, "the observer's k2 held");
     write_holding(&mut b, FAULTS, 0);
     let t = torques(&mut b, 8000);
     let k = t.iter().position(|&u| u > 0.0).unwrap_or(0);
