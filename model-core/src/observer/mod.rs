@@ -104,9 +104,9 @@ pub const MAX_K2_MOVE: f64 = 0.15;
 /// the streak. (Ended at the gate, as it was, a valve step behind a transmitter's lag that
 /// widens the innovation's variance had its streak broken by readings just inside the gate:
 /// the paper's valve, ×1 after ×1.3 at 3 mca, was taken as real 0.5 s after it moved, not
-/// 0.35 s, and the pressure loop's IAE was 1.03 × the PI alone's, 0.97 × now. On 1 800
+/// 0.3 s, and the pressure loop's IAE was 1.03 × the PI alone's, 0.97 × now. On 1 800
 /// random plants 102 more comparisons with the PI alone won, 7 figure targets fewer;
-/// at 0.4, 104 more won on 1 200 of them and 66 targets fewer: docs/observer.md.)
+/// at 0.4, 102 more won on 1 200 of them and 66 targets fewer: docs/observer.md.)
 pub const STREAK_FRACTION: f64 = 0.6;
 /// Longest sub-step of the mean's integration, s.
 pub const MAX_SUBSTEP_S: f64 = 0.05;
