@@ -180,9 +180,9 @@ pub struct ControlArgs {
     /// Seed of the plant's noise (the same for every law).
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// How long a scenario file's last row holds, s.
-    #[arg(long, default_value_t = 6.0)]
-    pub hold_s: f64,
+    /// How long a scenario file's last row holds, s (0 exclusive..3600).
+    #[arg(long, default_value = "6")]
+    pub hold_s: String,
     /// The plant: curve error, rotor inertia, water inertia, drive lag, pressure transmitter
     /// lag.
     #[command(flatten)]

@@ -349,15 +349,18 @@ pub fn read_scenario(path: &Path, hold_s: f64) -> Result<Scenario, InputError> {
         let cell = |k: usize| -> Option<(usize, &str)> {
             cols[k].map(|c| (c, record.get(c).unwrap_or("")))
         };
-        let number = |k: usize, name: &str| -> Result<Option<f64>, InputError> {
+        // A cell's value and its text, which a refusal echoes as typed (`Short` would print
+        // 100000 as "1e5").
+        let number = |k: usize, name: &str| -> Result<Option<(f64, String)>, InputError> {
             match cell(k) {
                 None => Ok(None),
                 Some((_, "")) => Ok(None),
-                Some((c, text)) => crate::input::finite_cell(path, line, c, name, text).map(Some),
+                Some((c, text)) => crate::input::finite_cell(path, line, c, name, text)
+                    .map(|v| Some((v, crate::input::shown(text.trim())))),
             }
         };
         let col = |k: usize| cols[k].unwrap_or(0);
-        let t_s = number(0, "t_s")?
+        let (t_s, t_text) = number(0, "t_s")?
             .ok_or_else(|| err(line, col(0), "t_s", "empty: a time is needed".into()))?;
         match rows.last() {
             None if t_s != 0.0 => {
@@ -365,10 +368,7 @@ pub fn read_scenario(path: &Path, hold_s: f64) -> Result<Scenario, InputError> {
                     line,
                     col(0),
                     "t_s",
-                    format!(
-                        "the first row's time is {} s: it must be 0 (the settled start)",
-                        Short(t_s)
-                    ),
+                    format!("the first row's time is {t_text} s: it must be 0 (the settled start)"),
                 ))
             }
             Some(prev) if !(t_s > prev.t_s) => {
@@ -377,8 +377,7 @@ pub fn read_scenario(path: &Path, hold_s: f64) -> Result<Scenario, InputError> {
                     col(0),
                     "t_s",
                     format!(
-                        "time {} s is not after the previous row's {} s",
-                        Short(t_s),
+                        "time {t_text} s is not after the previous row's {} s",
                         Short(prev.t_s)
                     ),
                 ))
@@ -390,10 +389,10 @@ pub fn read_scenario(path: &Path, hold_s: f64) -> Result<Scenario, InputError> {
                 line,
                 col(0),
                 "t_s",
-                format!("time {t_s} s is beyond the longest scenario, {MAX_SCENARIO_S} s"),
+                format!("time {t_text} s is beyond the longest scenario, {MAX_SCENARIO_S} s"),
             ));
         }
-        let mode_v = number(1, "mode")?
+        let (mode_v, mode_text) = number(1, "mode")?
             .ok_or_else(|| err(line, col(1), "mode", "empty: a mode is needed".into()))?;
         if !(mode_v.fract() == 0.0 && (0.0..=4.0).contains(&mode_v)) {
             return Err(err(
@@ -401,14 +400,13 @@ pub fn read_scenario(path: &Path, hold_s: f64) -> Result<Scenario, InputError> {
                 col(1),
                 "mode",
                 format!(
-                    "unknown mode {}: 0 stop, 1 manual torque, 2 profile, 3 pressure, 4 flow",
-                    Short(mode_v)
+                    "unknown mode {mode_text}: 0 stop, 1 manual torque, 2 profile, 3 pressure, 4 flow"
                 ),
             ));
         }
         let mode = mode_v as u16;
         let setpoint = match (setpoint_range(mode), number(2, "setpoint")?) {
-            (None, v) => v.unwrap_or(0.0),
+            (None, v) => v.map_or(0.0, |(v, _)| v),
             (Some(_), None) => {
                 return Err(err(
                     line,
@@ -417,15 +415,14 @@ pub fn read_scenario(path: &Path, hold_s: f64) -> Result<Scenario, InputError> {
                     format!("empty: mode {mode} needs a setpoint"),
                 ))
             }
-            (Some((max, unit)), Some(v)) => {
+            (Some((max, unit)), Some((v, text))) => {
                 if !(0.0..=max).contains(&v) {
                     return Err(err(
                         line,
                         col(2),
                         "setpoint",
                         format!(
-                            "setpoint {} {unit} is outside mode {mode}'s register range 0..{}",
-                            Short(v),
+                            "setpoint {text} {unit} is outside mode {mode}'s register range 0..{}",
                             Short(max)
                         ),
                     ));
@@ -433,7 +430,7 @@ pub fn read_scenario(path: &Path, hold_s: f64) -> Result<Scenario, InputError> {
                 v
             }
         };
-        let valve = number(3, "valve")?.ok_or_else(|| {
+        let (valve, valve_text) = number(3, "valve")?.ok_or_else(|| {
             err(
                 line,
                 col(3),
@@ -447,8 +444,7 @@ pub fn read_scenario(path: &Path, hold_s: f64) -> Result<Scenario, InputError> {
                 col(3),
                 "valve",
                 format!(
-                    "valve factor {} is outside {}..{}",
-                    Short(valve),
+                    "valve factor {valve_text} is outside {}..{}",
                     Short(VALVE_FACTOR_MIN),
                     Short(VALVE_FACTOR_MAX)
                 ),
@@ -457,14 +453,9 @@ pub fn read_scenario(path: &Path, hold_s: f64) -> Result<Scenario, InputError> {
         let flag = |k: usize, name: &str| -> Result<bool, InputError> {
             match number(k, name)? {
                 None => Ok(true),
-                Some(1.0) => Ok(true),
-                Some(0.0) => Ok(false),
-                Some(v) => Err(err(
-                    line,
-                    col(k),
-                    name,
-                    format!("{} is not 0 or 1", Short(v)),
-                )),
+                Some((1.0, _)) => Ok(true),
+                Some((0.0, _)) => Ok(false),
+                Some((_, text)) => Err(err(line, col(k), name, format!("{text} is not 0 or 1"))),
             }
         };
         let sensors = SensorState {
@@ -1394,6 +1385,20 @@ pub fn write_csv(
 }
 
 /// The scenario of `--scenario`: a built-in name, else a file.
+/// `--hold-s`, s: finite, over 0, at most [`MAX_SCENARIO_S`]; a refusal echoes the value as
+/// typed (parsed, `100000` printed as "1e5").
+fn parse_hold_s(text: &str) -> Result<f64, String> {
+    let v = crate::plant::finite("--hold-s", text)?;
+    if v > 0.0 && v <= MAX_SCENARIO_S {
+        Ok(v)
+    } else {
+        Err(format!(
+            "--hold-s {}: must be within 0..{MAX_SCENARIO_S} s (exclusive of 0)",
+            crate::input::shown(text.trim())
+        ))
+    }
+}
+
 fn scenario_of(text: &str, hold_s: f64) -> Result<(Scenario, Option<PathBuf>), Failure> {
     if let Some(s) = built_in(text) {
         return Ok((s, None));
@@ -1426,14 +1431,8 @@ pub fn command(a: ControlArgs) -> Result<(), Failure> {
         );
         return served.map_err(|message| Failure { code: 1, message });
     };
-    if !(a.hold_s.is_finite() && a.hold_s > 0.0 && a.hold_s <= MAX_SCENARIO_S) {
-        return Err(Failure::usage(format!(
-            "--hold-s {}: must be within 0..{} s (exclusive of 0)",
-            Short(a.hold_s),
-            Short(MAX_SCENARIO_S)
-        )));
-    }
-    let (scenario, path) = scenario_of(name, a.hold_s)?;
+    let hold_s = parse_hold_s(&a.hold_s).map_err(Failure::usage)?;
+    let (scenario, path) = scenario_of(name, hold_s)?;
     let settings = a
         .set
         .iter()

@@ -201,7 +201,7 @@ fn in_range(option: &str, text: &str, (lo, hi): (f64, f64), unit: &str) -> Resul
 }
 
 /// `text` as a finite number, or a one-line message naming `option`.
-fn finite(option: &str, text: &str) -> Result<f64, String> {
+pub(crate) fn finite(option: &str, text: &str) -> Result<f64, String> {
     let t = text.trim();
     match t.parse::<f64>() {
         Ok(v) if v.is_finite() => Ok(v),

@@ -149,6 +149,31 @@ fn bad_scenarios_and_options_are_refused_with_one_line() {
         &["--output", "same file"],
         "output over the scenario",
     );
+    // Values echoed as typed, not in their shortest form ("1e5", "1e1", "7", "2").
+    for (arg, want) in [
+        ("100000", "--hold-s 100000: must be within"),
+        ("abc", "'abc'"),
+    ] {
+        refused(
+            &pumpbench(&["control", "--scenario", &s, "--hold-s", arg]),
+            &[want],
+            "hold",
+        );
+    }
+    for (name, row, want) in [
+        ("sp.csv", "0,3,100000,1,1", "setpoint 100000 mca is outside"),
+        ("valve.csv", "0,3,2,10.0,1", "valve factor 10.0 is outside"),
+        ("mode.csv", "0,7.0,2,1,1", "unknown mode 7.0"),
+        ("flag.csv", "0,3,2,1,2.0", "2.0 is not 0 or 1"),
+        ("first.csv", "1e2,3,2,1,1", "the first row's time is 1e2 s"),
+    ] {
+        let f = write(
+            dir.path(),
+            name,
+            &format!("t_s,mode,setpoint,valve,link\n{row}\n"),
+        );
+        refused(&pumpbench(&["control", "--scenario", &f]), &[want], name);
+    }
     // A setpoint the plant cannot hold at its start.
     let far = write(dir.path(), "far.csv", "t_s,mode,setpoint,valve\n0,3,60,1\n");
     refused(
