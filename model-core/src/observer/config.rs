@@ -52,8 +52,7 @@ pub struct ObserverConfig<T> {
     pub initial_sigma: [T; STATES],
     /// Innovation gate, in standard deviations of the innovation (> 0).
     pub gate_sigma: T,
-    /// Innovations in a streak (see [`super::STREAK_FRACTION`]) after which a channel's change
-    /// is taken as real (≥ 1).
+    /// Rejections in a row after which a channel's innovation is taken as real (≥ 1).
     pub max_rejections: u8,
     /// Standard deviation added to k2 when a rejected change is taken as real.
     pub k2_jump_sigma: T,

@@ -42,11 +42,9 @@
 //! A measurement that is not finite or is physically implausible (pressure below
 //! min(−c, 0) − 0.5 mca or above 60 mca, flow below −0.5 l/s or above 60 l/s, speed below −50 or above 4000
 //! rpm: a transmitter at 2 mA, a NaN) is not used. An innovation whose normalised square
-//! exceeds [`ObserverConfig::gate_sigma`]² is rejected as an outlier, unless it is the
-//! [`ObserverConfig::max_rejections`]th of a streak: a streak starts with an innovation past
-//! the gate and goes on while each one's normalised square stays above [`STREAK_FRACTION`] of
-//! the gate's (those within the gate are used as ever). At the streak's last the change is
-//! taken as real (the valve moved) and, for pressure and flow, k2's variance is raised by
+//! exceeds [`ObserverConfig::gate_sigma`]² is rejected as an outlier, unless the channel has
+//! been rejected [`ObserverConfig::max_rejections`] times in a row: then the change is taken
+//! as real (the valve moved) and, for pressure and flow, k2's variance is raised by
 //! [`ObserverConfig::k2_jump_sigma`]² before the update, so the filter re-converges in a few
 //! samples instead of tens of seconds; one update moves k2 by at most [`MAX_K2_MOVE`] of
 //! itself. The covariance is kept symmetric, its diagonal positive; k2 and the scales stay within
@@ -98,16 +96,6 @@ pub const FLOW_LAGGED: usize = 5;
 /// Largest relative move of k2 in one measurement update (see [`Observer::step`]'s
 /// updates: a trust region for the linearisation).
 pub const MAX_K2_MOVE: f64 = 0.15;
-/// A streak of innovations that [`ObserverConfig::max_rejections`] ends as a real change goes
-/// on while each innovation's normalised square is above this fraction of the gate's
-/// ([`ObserverConfig::gate_sigma`]²: with the default 6 σ, above 4.65 σ); one below it ends
-/// the streak. (Ended at the gate, as it was, a valve step behind a transmitter's lag that
-/// widens the innovation's variance had its streak broken by readings just inside the gate:
-/// the paper's valve, ×1 after ×1.3 at 3 mca, was taken as real 0.5 s after it moved, not
-/// 0.3 s, and the pressure loop's IAE was 1.03 × the PI alone's, 0.97 × now. On 1 800
-/// random plants 102 more comparisons with the PI alone won, 7 figure targets fewer;
-/// at 0.4, 102 more won on 1 200 of them and 66 targets fewer: docs/observer.md.)
-pub const STREAK_FRACTION: f64 = 0.6;
 /// Longest sub-step of the mean's integration, s.
 pub const MAX_SUBSTEP_S: f64 = 0.05;
 /// Longest `dt` of one [`Observer::step`], s (the error message repeats it).
@@ -547,31 +535,23 @@ impl<T: Real> Observer<T> {
         let s = self.p[i][i] + r;
         let nis = nu * nu / s;
         let gate = self.cfg.gate_sigma * self.cfg.gate_sigma;
-        // A streak starts past the gate and goes on past STREAK_FRACTION of it. (Outside a
-        // streak an innovation within the gate costs one comparison more than the gate's
-        // own: the tick's longest step runs three of them.)
-        if nis > gate || self.rejections[ch] > 0 {
-            if nis > gate * T::from_f64(STREAK_FRACTION) {
-                self.rejections[ch] = self.rejections[ch].saturating_add(1);
-            } else {
-                self.rejections[ch] = 0;
-            }
-            if self.rejections[ch] >= self.cfg.max_rejections {
-                // A lasting change, not an outlier: let the valve move (pressure and flow
-                // only: a lasting speed offset says nothing about the valve).
-                self.rejections[ch] = 0;
-                if ch < 2 {
-                    let j = self.cfg.k2_jump_sigma;
-                    self.p[K2][K2] += j * j;
-                }
-            } else if nis > gate {
+        if nis > gate {
+            self.rejections[ch] = self.rejections[ch].saturating_add(1);
+            if self.rejections[ch] < self.cfg.max_rejections {
                 return Innovation {
                     used: Use::Rejected,
                     value: nu,
                     nis,
                 };
             }
+            // A lasting change, not an outlier: let the valve move (pressure and flow only:
+            // a lasting speed offset says nothing about the valve).
+            if ch < 2 {
+                let j = self.cfg.k2_jump_sigma;
+                self.p[K2][K2] += j * j;
+            }
         }
+        self.rejections[ch] = 0;
         let s = self.p[i][i] + r;
         // Held states are "considered", not estimated (Schmidt): zero gain, their variance
         // and correlations kept, so the estimate's σ still carries their uncertainty. The
