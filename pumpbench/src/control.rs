@@ -351,14 +351,16 @@ pub fn read_scenario(path: &Path, hold_s: f64) -> Result<Scenario, InputError> {
         };
         // A cell's value and its text, which a refusal echoes as typed (`Short` would print
         // 100000 as "1e5").
-        let number = |k: usize, name: &str| -> Result<Option<(f64, String)>, InputError> {
+        let number = |k: usize, name: &str| -> Result<Option<(f64, &str)>, InputError> {
             match cell(k) {
                 None => Ok(None),
                 Some((_, "")) => Ok(None),
-                Some((c, text)) => crate::input::finite_cell(path, line, c, name, text)
-                    .map(|v| Some((v, crate::input::shown(text.trim())))),
+                Some((c, text)) => {
+                    crate::input::finite_cell(path, line, c, name, text).map(|v| Some((v, text)))
+                }
             }
         };
+        let shown = |text: &str| crate::input::shown(text.trim());
         let col = |k: usize| cols[k].unwrap_or(0);
         let (t_s, t_text) = number(0, "t_s")?
             .ok_or_else(|| err(line, col(0), "t_s", "empty: a time is needed".into()))?;
@@ -368,7 +370,10 @@ pub fn read_scenario(path: &Path, hold_s: f64) -> Result<Scenario, InputError> {
                     line,
                     col(0),
                     "t_s",
-                    format!("the first row's time is {t_text} s: it must be 0 (the settled start)"),
+                    format!(
+                        "the first row's time is {} s: it must be 0 (the settled start)",
+                        shown(t_text)
+                    ),
                 ))
             }
             Some(prev) if !(t_s > prev.t_s) => {
@@ -377,7 +382,8 @@ pub fn read_scenario(path: &Path, hold_s: f64) -> Result<Scenario, InputError> {
                     col(0),
                     "t_s",
                     format!(
-                        "time {t_text} s is not after the previous row's {} s",
+                        "time {} s is not after the previous row's {} s",
+                        shown(t_text),
                         Short(prev.t_s)
                     ),
                 ))
@@ -389,7 +395,10 @@ pub fn read_scenario(path: &Path, hold_s: f64) -> Result<Scenario, InputError> {
                 line,
                 col(0),
                 "t_s",
-                format!("time {t_text} s is beyond the longest scenario, {MAX_SCENARIO_S} s"),
+                format!(
+                    "time {} s is beyond the longest scenario, {MAX_SCENARIO_S} s",
+                    shown(t_text)
+                ),
             ));
         }
         let (mode_v, mode_text) = number(1, "mode")?
@@ -400,7 +409,8 @@ pub fn read_scenario(path: &Path, hold_s: f64) -> Result<Scenario, InputError> {
                 col(1),
                 "mode",
                 format!(
-                    "unknown mode {mode_text}: 0 stop, 1 manual torque, 2 profile, 3 pressure, 4 flow"
+                    "unknown mode {}: 0 stop, 1 manual torque, 2 profile, 3 pressure, 4 flow",
+                    shown(mode_text)
                 ),
             ));
         }
@@ -422,7 +432,8 @@ pub fn read_scenario(path: &Path, hold_s: f64) -> Result<Scenario, InputError> {
                         col(2),
                         "setpoint",
                         format!(
-                            "setpoint {text} {unit} is outside mode {mode}'s register range 0..{}",
+                            "setpoint {} {unit} is outside mode {mode}'s register range 0..{}",
+                            shown(text),
                             Short(max)
                         ),
                     ));
@@ -444,7 +455,8 @@ pub fn read_scenario(path: &Path, hold_s: f64) -> Result<Scenario, InputError> {
                 col(3),
                 "valve",
                 format!(
-                    "valve factor {valve_text} is outside {}..{}",
+                    "valve factor {} is outside {}..{}",
+                    shown(valve_text),
                     Short(VALVE_FACTOR_MIN),
                     Short(VALVE_FACTOR_MAX)
                 ),
@@ -455,7 +467,12 @@ pub fn read_scenario(path: &Path, hold_s: f64) -> Result<Scenario, InputError> {
                 None => Ok(true),
                 Some((1.0, _)) => Ok(true),
                 Some((0.0, _)) => Ok(false),
-                Some((_, text)) => Err(err(line, col(k), name, format!("{text} is not 0 or 1"))),
+                Some((_, text)) => Err(err(
+                    line,
+                    col(k),
+                    name,
+                    format!("{} is not 0 or 1", shown(text)),
+                )),
             }
         };
         let sensors = SensorState {
@@ -1384,7 +1401,6 @@ pub fn write_csv(
     Ok(())
 }
 
-/// The scenario of `--scenario`: a built-in name, else a file.
 /// `--hold-s`, s: finite, over 0, at most [`MAX_SCENARIO_S`]; a refusal echoes the value as
 /// typed (parsed, `100000` printed as "1e5").
 fn parse_hold_s(text: &str) -> Result<f64, String> {
@@ -1399,6 +1415,7 @@ fn parse_hold_s(text: &str) -> Result<f64, String> {
     }
 }
 
+/// The scenario of `--scenario`: a built-in name, else a file.
 fn scenario_of(text: &str, hold_s: f64) -> Result<(Scenario, Option<PathBuf>), Failure> {
     if let Some(s) = built_in(text) {
         return Ok((s, None));
