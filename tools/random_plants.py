@@ -11,10 +11,14 @@ Each plant draws, from one seeded generator (the same seed, the same plants):
   With --lift MCA each plant also has a static lift drawn in 0..MCA (from a generator of its
   own: the same plants otherwise), which --tell writes into holding register 20 (the
   models' static head) as commissioning would.
+  --speed-lag-ms, --flow-update-ms, --transmitter-delay-ms and --drive-slew-pct-s give every
+  plant the same drive speed lag, flow meter update period, transport delay ahead of the
+  transmitters or drive torque ramp (the same plants otherwise).
 
 Usage:
   python3 tools/random_plants.py --bin target/release/pumpbench --plants 200 --seed 3 \
       [--jobs 2] [--out runs.tsv] [--against older.tsv] [--speed-lag-ms 50] [--flow-update-ms 200] [--lift 2 [--tell]]
+      [--transmitter-delay-ms 20] [--drive-slew-pct-s 100]
 
 Prints the totals (figure targets met by each law, comparisons the model law won, trips,
 NaN or torque-limit failures), the model law's misses per scenario and figure, and with
@@ -108,6 +112,13 @@ def main():
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--out", help="write one row per run (tab-separated) here")
     ap.add_argument("--against", help="an earlier --out file of the same plants: runs that changed")
+    ap.add_argument("--transmitter-delay-ms", type=float, default=0.0,
+                    help="every plant's pressure and flow transmitters read through this "
+                         "transport delay ahead of their lags, ms (the same plants otherwise; "
+                         "0: none)")
+    ap.add_argument("--drive-slew-pct-s", type=float, default=0.0,
+                    help="every plant's drive ramps the torque reference it acts on at this "
+                         "rate, %%/s (the same plants otherwise; 0: none)")
     ap.add_argument("--speed-lag-ms", type=float, default=0.0,
                     help="every plant's drive reads its speed through this lag, ms (the same "
                          "plants otherwise; 0: none, the speed as it is)")
@@ -130,6 +141,12 @@ def main():
     if a.speed_lag_ms > 0:
         for p in plants:
             p["speed-lag-ms"] = a.speed_lag_ms
+    if a.transmitter_delay_ms > 0:
+        for p in plants:
+            p["transmitter-delay-ms"] = a.transmitter_delay_ms
+    if a.drive_slew_pct_s > 0:
+        for p in plants:
+            p["drive-slew-pct-s"] = a.drive_slew_pct_s
     if a.flow_update_ms > 0:
         for p in plants:
             p["flow-update-ms"] = a.flow_update_ms

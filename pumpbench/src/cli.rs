@@ -162,6 +162,7 @@ pub struct ControlArgs {
         "scenario", "controller", "targets", "output", "plot", "set", "seed", "hold_s",
         "flow_lag_ms", "curve_error", "curve_shape", "water_inertia", "drive_lag_ms", "rotor_inertia",
         "pressure_lag_ms", "speed_lag_ms", "static_head", "flow_update_ms",
+        "drive_slew_pct_s", "transmitter_delay_ms",
     ])]
     pub plant_stdio: bool,
     /// The law(s) to run.
@@ -533,6 +534,17 @@ pub struct PlantArgs {
         allow_hyphen_values = true
     )]
     pub drive_lag_ms: String,
+    /// The drive's own torque ramp, % of nominal torque per s (0, or 10..100000; 0: none):
+    /// the reference the drive acts on follows the one it is sent no faster (a drive's ramp
+    /// setting), then its lag (--drive-lag-ms). The controller's own rate limit is 200 %/s
+    /// by default.
+    #[arg(
+        long,
+        value_name = "PCT_PER_S",
+        default_value = "0",
+        allow_hyphen_values = true
+    )]
+    pub drive_slew_pct_s: String,
     /// The rotor's inertia (motor, coupling and impeller: J of the speed equation), × the
     /// paper's (0.25..4; 1: the paper's bench, and the record's bytes).
     #[arg(
@@ -550,6 +562,16 @@ pub struct PlantArgs {
         allow_hyphen_values = true
     )]
     pub pressure_lag_ms: String,
+    /// A transport delay ahead of the pressure and flow transmitters' lags, ms (0..1000; 0:
+    /// none): a tap or a meter down the pipe, a transmitter that samples and filters
+    /// digitally, a reading over a fieldbus. The drive's readings are not delayed.
+    #[arg(
+        long,
+        value_name = "MS",
+        default_value = "0",
+        allow_hyphen_values = true
+    )]
+    pub transmitter_delay_ms: String,
     /// First-order lag of the drive's speed reading, ms (0..2000; 0: none): a drive's
     /// filtered speed estimate, read over its link, lags the rotor.
     #[arg(

@@ -205,6 +205,8 @@ pub fn plant_options(
             water_inertia: plant::parse_water_inertia(&a.water_inertia).map_err(Failure::usage)?,
             drive_lag_s: plant::parse_lag_ms("--drive-lag-ms", &a.drive_lag_ms)
                 .map_err(Failure::usage)?,
+            drive_slew_pct_s: plant::parse_drive_slew(&a.drive_slew_pct_s)
+                .map_err(Failure::usage)?,
         },
         rotor_inertia: plant::parse_rotor_inertia(&a.rotor_inertia).map_err(Failure::usage)?,
         flow_lag_s: plant::parse_lag_ms("--flow-lag-ms", flow_lag_ms).map_err(Failure::usage)?,
@@ -215,6 +217,8 @@ pub fn plant_options(
         flow_update_s: plant::parse_lag_ms("--flow-update-ms", &a.flow_update_ms)
             .map_err(Failure::usage)?,
         static_head_mca: plant::parse_static_head(&a.static_head).map_err(Failure::usage)?,
+        transmitter_delay_s: plant::parse_delay_ms(&a.transmitter_delay_ms)
+            .map_err(Failure::usage)?,
     })
 }
 

@@ -1507,7 +1507,7 @@ pub fn command(a: ControlArgs) -> Result<(), Failure> {
     bar.finish_and_clear();
     let plant_text = format!(
         "plant: curve error {},{} %, curve shape {},{} %, rotor inertia {} × the paper's, water inertia {} mca·s²/l, \
-         drive lag {} ms, pressure lag {} ms, flow lag {} ms, speed reading lag {} ms, seed {}",
+         drive lag {} ms, pressure lag {} ms, flow lag {} ms, speed reading lag {} ms{}, seed {}",
         // (+ 0.0: a curve error of 0 is written 0, not -0.)
         Short(o.curve_error.head_pct + 0.0),
         Short(o.curve_error.torque_pct + 0.0),
@@ -1519,6 +1519,7 @@ pub fn command(a: ControlArgs) -> Result<(), Failure> {
         Short(o.pressure_lag_s * 1000.0),
         Short(o.flow_lag_s * 1000.0),
         Short(o.speed_lag_s * 1000.0),
+        rarer_plant_text(&o),
         o.seed
     );
     if let Some(out) = &a.output {
@@ -1535,6 +1536,22 @@ pub fn command(a: ControlArgs) -> Result<(), Failure> {
         report(&scenario, &plant_text, &runs, a.targets, truth)
     );
     Ok(())
+}
+
+/// The plant options printed only when set (the plant line of the plants without them as it
+/// was): the drive's ramp and the transmitters' transport delay.
+fn rarer_plant_text(o: &PlantOptions) -> String {
+    let mut t = String::new();
+    if o.dynamics.drive_slew_pct_s > 0.0 {
+        t += &format!(", drive ramp {} %/s", Short(o.dynamics.drive_slew_pct_s));
+    }
+    if o.transmitter_delay_s > 0.0 {
+        t += &format!(
+            ", transmitter delay {} ms",
+            Short(o.transmitter_delay_s * 1000.0)
+        );
+    }
+    t
 }
 
 #[cfg(test)]

@@ -20,7 +20,13 @@
 //!   the valve and the static head take accelerating the water column (for a pipe of length
 //!   ℓ m and section A m², L = ℓ / (g A) / 1000: 10 m of 50 mm pipe is 0.52);
 //! - the drive's torque loop: the electromagnetic torque follows Te(u) (eq. 4) through a
-//!   first-order lag.
+//!   first-order lag;
+//! - the drive's own torque ramp: the reference it acts on follows the one it is sent no
+//!   faster than a rate (%/s), as a drive's ramp setting limits it.
+//!
+//! And a transport delay ahead of both transmitters' lags
+//! ([`PlantOptions::transmitter_delay_s`]): a pressure tap or a meter down the pipe, a
+//! transmitter that samples and filters digitally, a reading that crosses a fieldbus.
 //!
 //! Its rotor's inertia (J of eq. 3) can be the paper's times a factor
 //! ([`PlantOptions::rotor_inertia`]; another motor and impeller).
@@ -53,6 +59,7 @@ use model_core::excitation::SplitMix64;
 use model_core::params::PAPER_C_MCA;
 use model_core::transmitter::lag_to;
 use model_core::{BenchParams, BenchState, Scheme, WhiteBox, MAX_STEP_S};
+use std::collections::VecDeque;
 
 /// Transmitter model of one signal.
 #[derive(Debug, Clone, Copy)]
@@ -175,6 +182,38 @@ pub struct Dynamics {
     pub water_inertia: f64,
     /// First-order lag of the drive's torque loop, s (0..=2 s).
     pub drive_lag_s: f64,
+    /// The drive's own torque ramp, % of nominal torque per s (0: none, else
+    /// [`DRIVE_SLEW_RANGE_PCT_S`]): the reference the drive acts on moves toward the one it
+    /// is sent by at most this rate × the step at each step's start (steps of ≤ 1 ms).
+    pub drive_slew_pct_s: f64,
+}
+
+/// `--drive-slew-pct-s`' range when not 0, % of nominal torque per s: from a drive ramping
+/// 0..100 % in 10 s to one far faster than the controller's own rate limit (200 %/s by
+/// default, holding register 12).
+pub const DRIVE_SLEW_RANGE_PCT_S: (f64, f64) = (10.0, 100_000.0);
+
+/// Parses `--drive-slew-pct-s R` (% of nominal torque per s): 0 (none), or finite within
+/// [`DRIVE_SLEW_RANGE_PCT_S`].
+pub fn parse_drive_slew(text: &str) -> Result<f64, String> {
+    let r = finite("--drive-slew-pct-s", text)?;
+    let (lo, hi) = DRIVE_SLEW_RANGE_PCT_S;
+    if r == 0.0 || (lo..=hi).contains(&r) {
+        Ok(r.abs())
+    } else {
+        Err(format!(
+            "--drive-slew-pct-s {}: must be 0 or within {lo}..{hi} %/s",
+            shown(text.trim())
+        ))
+    }
+}
+
+/// Longest transport delay accepted ahead of the transmitters, ms.
+pub const DELAY_MAX_MS: f64 = 1000.0;
+
+/// Parses `--transmitter-delay-ms MS`: finite, within 0..=[`DELAY_MAX_MS`]. Returns seconds.
+pub fn parse_delay_ms(text: &str) -> Result<f64, String> {
+    Ok(in_range("--transmitter-delay-ms", text, (0.0, DELAY_MAX_MS), " ms")? / 1000.0)
 }
 
 impl Dynamics {
@@ -182,6 +221,7 @@ impl Dynamics {
     pub const NONE: Self = Self {
         water_inertia: 0.0,
         drive_lag_s: 0.0,
+        drive_slew_pct_s: 0.0,
     };
 }
 
@@ -311,25 +351,29 @@ pub fn true_bench(e: CurveError, rotor_inertia: f64) -> Result<WhiteBox<f64>, St
 
 /// The bench with the dynamics the paper's model lacks ([`Dynamics`]): speed, flow (a state
 /// when there is water inertia, else the flow balance's root) and the electromagnetic torque
-/// the drive delivers (lagged when the drive has a lag).
+/// the drive delivers (lagged when the drive has a lag), and the reference the drive acts on
+/// (its ramp's output: the reference sent, without a ramp).
 #[derive(Debug, Clone, Copy)]
 struct Rich {
     speed_rpm: f64,
     flow_lps: f64,
     te_pct: f64,
+    ramped_pct: f64,
 }
 
 /// Most RK4 sub-steps in one step of the rich bench (the flow's time constant sets them).
 const RICH_MAX_SUBSTEPS: f64 = 1000.0;
 
 impl Rich {
-    /// At the white-box bench's (steady) `state`, the drive delivering Te(u) for its torque.
-    fn at(bench: &WhiteBox<f64>, state: &BenchState<f64>) -> Self {
+    /// At the white-box bench's (steady) `state` under the torque reference `u`, the drive
+    /// delivering Te(u).
+    fn at(bench: &WhiteBox<f64>, state: &BenchState<f64>, u: f64) -> Self {
         let s = bench.signals(state);
         Rich {
             speed_rpm: s.speed_rpm,
             flow_lps: s.flow_lps,
             te_pct: s.electromagnetic_torque_pct,
+            ramped_pct: u,
         }
     }
 
@@ -350,7 +394,8 @@ impl Rich {
         (dw, dq)
     }
 
-    /// Advances by `h` seconds with the torque reference `u` held: the drive's lag exactly
+    /// Advances by `h` seconds with the torque reference `u` held: the drive's ramp (above),
+    /// its lag exactly
     /// (its target Te(u) is constant over the step), speed and flow by RK4 in equal sub-steps,
     /// as many as keep a sub-step under half the flow's time constant `L / |∂g/∂Q|`. Without
     /// inertia the flow is the flow balance's root at each stage (as in the white-box bench).
@@ -358,6 +403,15 @@ impl Rich {
     /// column) with a drive torque that moves within the step, which the white-box's one-state
     /// step with the torque held does not integrate; it calls the same equations.
     fn advance(&mut self, bench: &WhiteBox<f64>, d: &Dynamics, u: f64, h: f64) {
+        // The drive's ramp: a step of at most the rate × h toward the reference sent, at
+        // the step's start (none: the reference itself, to the bit).
+        let u = if d.drive_slew_pct_s > 0.0 {
+            let most = d.drive_slew_pct_s * h;
+            self.ramped_pct + (u - self.ramped_pct).clamp(-most, most)
+        } else {
+            u
+        };
+        self.ramped_pct = u;
         let target = electromagnetic_torque_pct(&bench.params().gamma, u);
         let te0 = self.te_pct;
         let te_at = |t: f64| lag_to(te0, target, t, d.drive_lag_s);
@@ -421,6 +475,10 @@ pub struct PlantOptions {
     /// Under it the pump moves no water and the transmitter reads it (a check valve holds
     /// the column).
     pub static_head_mca: f64,
+    /// A transport delay ahead of the pressure and flow transmitters' lags, s (0: none; at
+    /// most [`DELAY_MAX_MS`]): each transmitter's lag follows the true value of this long
+    /// ago, at the plant's steps' resolution (≤ 1 ms). The drive's readings are not delayed.
+    pub transmitter_delay_s: f64,
 }
 
 /// `--static-head`'s range, mca: from the paper's bench's side (the transmitter above the
@@ -447,6 +505,7 @@ impl PlantOptions {
             speed_lag_s: SPEED.tau_s,
             flow_update_s: 0.0,
             static_head_mca: -PAPER_C_MCA,
+            transmitter_delay_s: 0.0,
         }
     }
 }
@@ -529,6 +588,12 @@ pub struct Plant {
     flow_update_s: f64,
     flow_shown: f64,
     flow_age_s: f64,
+    /// The transport delay ahead of the pressure and flow transmitters, s (0: none), the
+    /// plant's time, s, and the true (time, flow, pressure) since the delay's start: the
+    /// first entry is the latest at least the delay old (the start's at −∞).
+    delay_s: f64,
+    t_s: f64,
+    history: VecDeque<(f64, f64, f64)>,
     rng: SplitMix64,
     sensors: SensorState,
 }
@@ -569,6 +634,9 @@ impl Plant {
             flow_update_s: o.flow_update_s,
             flow_shown: 0.0,
             flow_age_s: 0.0,
+            delay_s: o.transmitter_delay_s,
+            t_s: 0.0,
+            history: VecDeque::new(),
             rng: SplitMix64::new(o.seed),
             sensors: SensorState::OK,
         };
@@ -577,9 +645,13 @@ impl Plant {
             .bench
             .steady_state(torque_ref_pct)
             .map_err(|e| PlantError::Model(e.to_string()))?;
-        plant.rich = (o.dynamics != Dynamics::NONE).then(|| Rich::at(&plant.bench, &plant.state));
+        plant.rich = (o.dynamics != Dynamics::NONE)
+            .then(|| Rich::at(&plant.bench, &plant.state, torque_ref_pct));
         plant.seen = plant.now();
         plant.flow_shown = plant.seen.1;
+        plant
+            .history
+            .push_back((f64::NEG_INFINITY, plant.seen.1, plant.seen.2));
         Ok(plant)
     }
 
@@ -648,9 +720,10 @@ impl Plant {
         if !(w_now.is_finite() && q_now.is_finite()) {
             return Err(PlantError::Diverged);
         }
+        let (q_in, p_in) = self.delayed(q_now, p_now, h_s);
         let (s, q, p) = &mut self.seen;
-        self.pressure.lag(p, p_now, h_s);
-        self.flow.lag(q, q_now, h_s);
+        self.pressure.lag(p, p_in, h_s);
+        self.flow.lag(q, q_in, h_s);
         self.speed.lag(s, w_now, h_s);
         // The meter's output: the lagged flow now, or at its last update (a step's rounding
         // of 1e-9 s: 200 steps of 1 ms are one 0.2 s period).
@@ -664,6 +737,26 @@ impl Plant {
             self.flow_shown = *q;
         }
         Ok(())
+    }
+
+    /// The flow and pressure the transmitters' lags follow after a step of `h_s` that ends at
+    /// `q_now`, `p_now`: those values themselves without a delay, else the latest true
+    /// values at least the delay old.
+    fn delayed(&mut self, q_now: f64, p_now: f64, h_s: f64) -> (f64, f64) {
+        if self.delay_s <= 0.0 {
+            return (q_now, p_now);
+        }
+        self.t_s += h_s;
+        self.history.push_back((self.t_s, q_now, p_now));
+        // (1e-9 s: a step's rounding, as the flow meter's update.)
+        let due = self.t_s - self.delay_s + 1e-9;
+        while self.history.get(1).is_some_and(|&(t, _, _)| t <= due) {
+            self.history.pop_front();
+        }
+        // (Never empty: the start's entry stays until a later one is due.)
+        self.history
+            .front()
+            .map_or((q_now, p_now), |&(_, q, p)| (q, p))
     }
 
     /// The logged readings now (speed rpm, flow l/s, pressure mca): each transmitter's lagged
@@ -967,6 +1060,7 @@ mod tests {
             dynamics: Dynamics {
                 water_inertia: 0.0,
                 drive_lag_s: 0.05,
+                drive_slew_pct_s: 0.0,
             },
             ..PlantOptions::with_seed(1)
         };
@@ -1063,6 +1157,7 @@ mod tests {
                     dynamics: Dynamics {
                         water_inertia: water,
                         drive_lag_s: drive,
+                        drive_slew_pct_s: 0.0,
                     },
                     rotor_inertia: f,
                     ..PlantOptions::with_seed(1)
@@ -1084,5 +1179,125 @@ mod tests {
             let e = parse_rotor_inertia(bad).unwrap_err();
             assert!(e.starts_with("--rotor-inertia"), "{e}");
         }
+    }
+
+    /// A transport delay ahead of the transmitters: after a valve step the lagged pressure
+    /// and flow the transmitters show are, step for step, those of the plant without the
+    /// delay the delay earlier (the same noise draws); before the step's delay has passed
+    /// they have not moved. The drive's readings are not delayed. 0 is no delay, to the bit.
+    #[test]
+    fn a_transport_delay_shifts_the_transmitters_by_it() {
+        let o = PlantOptions {
+            pressure_lag_s: 0.03,
+            ..PlantOptions::with_seed(3)
+        };
+        let delayed = PlantOptions {
+            transmitter_delay_s: 0.025,
+            ..o
+        };
+        let (mut a, mut b) = (
+            Plant::new(&o, 1.0, 40.0).unwrap(),
+            Plant::new(&delayed, 1.0, 40.0).unwrap(),
+        );
+        let before = b.seen;
+        a.set_valve_factor(1.3).unwrap();
+        b.set_valve_factor(1.3).unwrap();
+        let (mut sa, mut sb) = (vec![], vec![]);
+        for _ in 0..100 {
+            a.advance(40.0, 1e-3).unwrap();
+            b.advance(40.0, 1e-3).unwrap();
+            sa.push(a.seen);
+            sb.push(b.seen);
+            assert_eq!(a.truth(), b.truth(), "the plant itself is the same");
+        }
+        for (k, seen) in sb.iter().enumerate().take(25) {
+            assert_eq!((seen.1, seen.2), (before.1, before.2), "step {k}");
+        }
+        // Step 25 + k follows the values of step k, through the same lags: with the torque
+        // held the plant's pressure after the valve is steady, so the delayed lag is the
+        // undelayed one 25 steps late (to rounding).
+        for k in 0..75 {
+            assert!(
+                (sb[k + 25].2 - sa[k].2).abs() < 1e-9,
+                "{k}: {:?} {:?}",
+                sb[k + 25],
+                sa[k]
+            );
+            assert!((sb[k + 25].1 - sa[k].1).abs() < 1e-9, "{k}");
+        }
+        assert!(
+            (sa[10].2 - before.2).abs() > 0.1,
+            "the valve moved the pressure"
+        );
+        assert_eq!(
+            sa.last().unwrap().0,
+            sb.last().unwrap().0,
+            "the speed is not delayed"
+        );
+        // No delay: the plant as it was, to the bit.
+        let zero = PlantOptions {
+            transmitter_delay_s: 0.0,
+            ..o
+        };
+        let mut c = Plant::new(&zero, 1.0, 40.0).unwrap();
+        c.set_valve_factor(1.3).unwrap();
+        for seen in &sa {
+            c.advance(40.0, 1e-3).unwrap();
+            assert_eq!(c.seen, *seen);
+        }
+    }
+
+    /// A drive ramping at 100 %/s delivers Te of its ramped reference: after 0.1 s of a
+    /// 30 → 60 % step the reference it acts on is 40 %, after 0.3 s 60 %; down alike. 0 is
+    /// no ramp: the plant as it was, to the bit. Out of its range, refused.
+    #[test]
+    fn the_drives_ramp_limits_the_reference_it_acts_on() {
+        let gamma = BenchParams::<f64>::paper().gamma;
+        let ramp = |slew: f64| PlantOptions {
+            dynamics: Dynamics {
+                drive_slew_pct_s: slew,
+                ..Dynamics::NONE
+            },
+            ..PlantOptions::with_seed(1)
+        };
+        let mut p = Plant::new(&ramp(100.0), 1.0, 30.0).unwrap();
+        for _ in 0..100 {
+            p.advance(60.0, 1e-3).unwrap();
+        }
+        let te = |u: f64| electromagnetic_torque_pct(&gamma, u);
+        assert!(
+            (p.truth().torque_pct - te(40.0)).abs() < 1e-6,
+            "{:?}",
+            p.truth()
+        );
+        for _ in 0..250 {
+            p.advance(60.0, 1e-3).unwrap();
+        }
+        assert!((p.truth().torque_pct - te(60.0)).abs() < 1e-9);
+        for _ in 0..50 {
+            p.advance(0.0, 1e-3).unwrap();
+        }
+        assert!((p.truth().torque_pct - te(55.0)).abs() < 1e-6);
+        // None: the same steps as the paper's dynamics, whose torque is Te(u) at once.
+        let (mut a, mut b) = (
+            Plant::new(&ramp(0.0), 1.0, 30.0).unwrap(),
+            Plant::new(&PlantOptions::with_seed(1), 1.0, 30.0).unwrap(),
+        );
+        for _ in 0..50 {
+            a.advance(60.0, 1e-3).unwrap();
+            b.advance(60.0, 1e-3).unwrap();
+        }
+        assert_eq!(a.truth(), b.truth());
+        assert_eq!(a.seen, b.seen);
+        for bad in ["5", "-20", "1e6", "nan", "x"] {
+            let e = parse_drive_slew(bad).unwrap_err();
+            assert!(
+                e.starts_with("--drive-slew-pct-s") && !e.contains('\n'),
+                "{e}"
+            );
+        }
+        assert_eq!(parse_drive_slew("0"), Ok(0.0));
+        assert_eq!(parse_delay_ms("25"), Ok(0.025));
+        assert!(parse_delay_ms("1001").is_err() && parse_delay_ms("-1").is_err());
     }
 }

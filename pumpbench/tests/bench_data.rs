@@ -436,6 +436,26 @@ fn bad_options_are_refused_with_one_line_exit_2_and_no_output() {
             "20ms",
             "--pressure-lag-ms '20ms': not a number",
         ),
+        (
+            "--transmitter-delay-ms",
+            "1500",
+            "--transmitter-delay-ms 1500: must be within 0..1000 ms",
+        ),
+        (
+            "--transmitter-delay-ms",
+            "-inf",
+            "--transmitter-delay-ms '-inf': not a finite number",
+        ),
+        (
+            "--drive-slew-pct-s",
+            "5",
+            "--drive-slew-pct-s 5: must be 0 or within 10..100000 %/s",
+        ),
+        (
+            "--drive-slew-pct-s",
+            "-100",
+            "--drive-slew-pct-s -100: must be 0 or within",
+        ),
     ];
     for (k, (option, value, expected)) in cases.iter().enumerate() {
         let output = d.join(format!("out{k}.csv"));

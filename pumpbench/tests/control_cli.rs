@@ -614,6 +614,30 @@ fn plant_stdio_refuses_the_built_in_plants_options() {
 /// The model law's and the PI alone's values of figure `label` in each row that prints it
 /// (`-`, a figure never reached, as NaN).
 /// `pumpbench control --scenario pressure-steps --controller model` with `extra` options.
+/// A transport delay ahead of the transmitters (`--transmitter-delay-ms`) is a lag the model
+/// does not have: the lag probe reads it as such (longer the longer it is), and the
+/// pressure steps still overshoot under 5 % on the paper's bench behind 40 and 80 ms.
+#[test]
+fn a_transport_delay_is_read_as_lag_and_the_steps_hold() {
+    let mut last = f64::NEG_INFINITY;
+    for delay in ["0", "40", "80"] {
+        let out = model_pressure_steps(&["--targets", "--transmitter-delay-ms", delay]);
+        let stdout = ok(&out, "control");
+        let measured = measured_on_first_line(&stdout, "measured plant lag: pressure ");
+        assert!(
+            measured > last + 20.0,
+            "{delay} ms: read {measured} ms after {last}"
+        );
+        last = measured;
+        let overshoot = figure_rows(&stdout, "overshoot (%)");
+        assert_eq!(overshoot.len(), 3, "{stdout}");
+        assert!(
+            overshoot.iter().all(|r| r[0] < 5.0),
+            "{delay} ms: {overshoot:?}"
+        );
+    }
+}
+
 fn model_pressure_steps(extra: &[&str]) -> std::process::Output {
     let mut args = vec![
         "control",
