@@ -13,12 +13,13 @@ Each plant draws, from one seeded generator (the same seed, the same plants):
   models' static head) as commissioning would.
   --speed-lag-ms, --flow-update-ms, --transmitter-delay-ms and --drive-slew-pct-s give every
   plant the same drive speed lag, flow meter update period, transport delay ahead of the
-  transmitters or drive torque ramp (the same plants otherwise).
+  transmitters or drive torque ramp (the same plants otherwise); --set REG=VALUE writes a
+  holding register before every run, as commissioning would.
 
 Usage:
   python3 tools/random_plants.py --bin target/release/pumpbench --plants 200 --seed 3 \
       [--jobs 2] [--out runs.tsv] [--against older.tsv] [--speed-lag-ms 50] [--flow-update-ms 200] [--lift 2 [--tell]]
-      [--transmitter-delay-ms 20] [--drive-slew-pct-s 100]
+      [--transmitter-delay-ms 20] [--drive-slew-pct-s 100] [--set 12=1000 ...]
 
 Prints the totals (figure targets met by each law, comparisons the model law won, trips,
 NaN or torque-limit failures), the model law's misses per scenario and figure, and with
@@ -58,7 +59,8 @@ def args_for(plant, scenario):
     for k, v in plant.items():
         if k == "flow-lag-ms" and scenario != "flow-steps":
             continue
-        a += [f"--{k}", str(v)]
+        for item in v if isinstance(v, list) else [v]:
+            a += [f"--{k}", str(item)]
     return a
 
 
@@ -119,6 +121,9 @@ def main():
     ap.add_argument("--drive-slew-pct-s", type=float, default=0.0,
                     help="every plant's drive ramps the torque reference it acts on at this "
                          "rate, %%/s (the same plants otherwise; 0: none)")
+    ap.add_argument("--set", action="append", default=[], metavar="REG=VALUE",
+                    help="a holding register written before every run of every plant, both "
+                         "laws (pumpbench control's --set; repeatable), as commissioning would")
     ap.add_argument("--speed-lag-ms", type=float, default=0.0,
                     help="every plant's drive reads its speed through this lag, ms (the same "
                          "plants otherwise; 0: none, the speed as it is)")
@@ -141,6 +146,9 @@ def main():
     if a.speed_lag_ms > 0:
         for p in plants:
             p["speed-lag-ms"] = a.speed_lag_ms
+    for p in plants:
+        if a.set:
+            p.setdefault("set", []).extend(a.set)
     if a.transmitter_delay_ms > 0:
         for p in plants:
             p["transmitter-delay-ms"] = a.transmitter_delay_ms
@@ -156,7 +164,7 @@ def main():
             h = round(lifts.uniform(0.0, a.lift), 2)
             p["static-head"] = h
             if a.tell:
-                p["set"] = f"20={round(h * 1000)}"
+                p.setdefault("set", []).append(f"20={round(h * 1000)}")
     work = [(i, p, s) for i, p in enumerate(plants) for s in SCENARIOS]
     results = {}
     failed = []

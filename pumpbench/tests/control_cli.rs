@@ -599,6 +599,8 @@ fn plant_stdio_refuses_the_built_in_plants_options() {
         ["--flow-lag-ms", "150"],
         ["--seed", "3"],
         ["--hold-s", "2"],
+        ["--transmitter-delay-ms", "20"],
+        ["--drive-slew-pct-s", "100"],
     ] {
         let out = pumpbench(&["control", "--plant-stdio", opt[0], opt[1]]);
         let err = String::from_utf8_lossy(&out.stderr);
@@ -611,9 +613,6 @@ fn plant_stdio_refuses_the_built_in_plants_options() {
     }
 }
 
-/// The model law's and the PI alone's values of figure `label` in each row that prints it
-/// (`-`, a figure never reached, as NaN).
-/// `pumpbench control --scenario pressure-steps --controller model` with `extra` options.
 /// A transport delay ahead of the transmitters (`--transmitter-delay-ms`) is a lag the model
 /// does not have: the lag probe reads it as such (longer the longer it is), and the
 /// pressure steps still overshoot under 5 % on the paper's bench behind 40 and 80 ms.
@@ -638,6 +637,7 @@ fn a_transport_delay_is_read_as_lag_and_the_steps_hold() {
     }
 }
 
+/// `pumpbench control --scenario pressure-steps --controller model` with `extra` options.
 fn model_pressure_steps(extra: &[&str]) -> std::process::Output {
     let mut args = vec![
         "control",
@@ -660,6 +660,8 @@ fn measured_on_first_line(stdout: &str, label: &str) -> f64 {
         .unwrap_or_else(|| panic!("no {label}in: {stdout}"))
 }
 
+/// The model law's and the PI alone's values of figure `label` in each row that prints it
+/// (`-`, a figure never reached, as NaN).
 fn figure_rows(stdout: &str, label: &str) -> Vec<[f64; 2]> {
     stdout
         .lines()
