@@ -69,7 +69,12 @@ pub fn flood(elf: &Path, seconds: u64, icount: bool) -> Result<String> {
     let (s0, t0) = (port.samples("before the flood")?, Instant::now());
     let (mut sent, mut answered, mut status_or) = (0u32, 0u32, 0u16);
     let mut status_and = 0xFFFFu16;
+    // For a failure's report: the slowest answer, and the first request unanswered (when
+    // in the flood, which kind, how many bytes of an answer came).
+    let mut slowest = Duration::ZERO;
+    let mut first_miss: Option<String> = None;
     while t0.elapsed() < Duration::from_secs(seconds) {
+        let asked = Instant::now();
         if sent % 10 == 9 {
             let (a, b) = (frame(&[1, 4, 0, 0, 0, 18]), frame(&[1, 3, 0, 0, 0, 3]));
             port.send(&[a, b].concat())?;
@@ -77,14 +82,29 @@ pub fn flood(elf: &Path, seconds: u64, icount: bool) -> Result<String> {
             let both = port.recv(41 + 11, Duration::from_secs(1));
             let ok = two_answers(&both, 18);
             answered += 2 * u32::from(ok);
+            if !ok && first_miss.is_none() {
+                first_miss = Some(format!(
+                    "two requests in one write at {:.3} s: {} of 52 bytes back in {} ms",
+                    (asked - t0).as_secs_f64(),
+                    both.len(),
+                    asked.elapsed().as_millis()
+                ));
+            }
         } else {
             sent += 1;
             if let Some(r) = port.inputs(0, 18, Duration::from_secs(1))? {
                 answered += 1;
                 status_or |= r[0];
                 status_and &= r[0];
+            } else if first_miss.is_none() {
+                first_miss = Some(format!(
+                    "a read at {:.3} s: no right answer in {} ms",
+                    (asked - t0).as_secs_f64(),
+                    asked.elapsed().as_millis()
+                ));
             }
         }
+        slowest = slowest.max(asked.elapsed());
     }
     let (s1, wall) = (port.samples("after the flood")?, t0.elapsed().as_secs_f64());
     let rate = loop_rate(s0, s1, wall);
@@ -92,6 +112,13 @@ pub fn flood(elf: &Path, seconds: u64, icount: bool) -> Result<String> {
     std::thread::sleep(Duration::from_millis(1500));
     drop(qemu);
     let lines: Vec<String> = log.try_iter().collect();
+    // The client's side, for the record and for a failure's diagnosis.
+    let client = format!(
+        "  client: slowest answer {} ms{}; {}\n",
+        slowest.as_millis(),
+        first_miss.map_or(String::new(), |m| format!(", first unanswered: {m}")),
+        bridge.stats.summary()
+    );
     verdict(
         &Seen {
             seconds,
@@ -105,6 +132,8 @@ pub fn flood(elf: &Path, seconds: u64, icount: bool) -> Result<String> {
         },
         &lines,
     )
+    .map(|r| r + &client)
+    .map_err(|e| e + &client)
 }
 
 /// What the client saw of a flood.
