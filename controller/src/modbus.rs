@@ -234,6 +234,18 @@ pub fn request_complete(frame: &[u8]) -> bool {
         && crc16(&frame[..n - 2]) == u16::from_le_bytes([frame[n - 2], frame[n - 1]])
 }
 
+/// `true` while `bytes` may still become a whole request as more bytes come: a function whose
+/// request length its fields fix (01..=06, 15, 16) and that length not reached yet (a 15 or
+/// 16 whose byte count has not come counts). A single byte may still be a unit address:
+/// `true` too. An empty slice gives `false`.
+pub fn request_may_grow(bytes: &[u8]) -> bool {
+    match bytes.get(1) {
+        None => bytes.len() == 1,
+        Some(1..=6 | 15 | 16) => request_len(bytes).is_none_or(|want| want > bytes.len()),
+        Some(_) => false,
+    }
+}
+
 /// Where a whole request ([`request_complete`]) ends `bytes`, if one does: its start. On a
 /// line that marks no silence (QEMU's serial ports), a valid request that follows noise with
 /// no gap is still found this way. The odds that noise passes for a request are those of a
@@ -243,9 +255,7 @@ pub fn request_complete(frame: &[u8]) -> bool {
 /// request-like run of bytes in its data.
 pub fn request_at_end(bytes: &[u8]) -> Option<usize> {
     let n = bytes.len();
-    let growing = matches!(bytes.get(1), Some(1..=6 | 15 | 16))
-        && request_len(bytes).is_none_or(|want| want > n);
-    if growing {
+    if request_may_grow(bytes) {
         return None;
     }
     if request_complete(bytes) {
@@ -594,6 +604,25 @@ mod tests {
         assert_eq!(request_len(&[1, 16, 0, 0, 0, 123, 255]), Some(264));
         assert_eq!(request_len(&[1, 0x11, 1, 2]), Some(4), "open length");
         assert_eq!(request_len(&[1, 0x85, 1, 2, 3]), Some(5), "open length");
+    }
+
+    #[test]
+    fn a_request_may_grow_until_its_length_is_reached() {
+        let read = frame(&[1, 4, 0, 0, 0, 18]);
+        let fc16 = frame(&[1, 16, 0, 0, 0, 2, 4, 0x13, 0x88, 0, 1]);
+        for req in [&read, &fc16] {
+            for k in 1..req.len() {
+                assert!(request_may_grow(&req[..k]), "{k} bytes of {req:02x?}");
+            }
+            assert!(!request_may_grow(req), "whole");
+        }
+        assert!(!request_may_grow(&[]));
+        assert!(!request_may_grow(&[1, 0x11]), "a function of open length");
+        assert!(!request_may_grow(&[1, 0x83, 2]), "an exception's code");
+        assert!(
+            !request_may_grow(&[1, 3, 0, 0, 0, 3, 5, 6, 7]),
+            "past its length"
+        );
     }
 
     #[test]

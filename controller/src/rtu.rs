@@ -129,6 +129,25 @@ impl RtuFramer {
         self.end_frame(out)
     }
 
+    /// As [`Self::poll`], except that bytes held which `may_grow` takes for the start of a
+    /// frame not yet whole (e.g. [`crate::modbus::request_may_grow`]) are kept until
+    /// `patience_us` µs of silence (taken as at least [`Self::gap_us`]): on a line whose bytes
+    /// can be held up longer than the silence inside a frame (QEMU's, behind a busy host), a
+    /// torn request is still answered, while bytes that cannot become one are dropped as
+    /// soon as by [`Self::poll`].
+    pub fn poll_patient(
+        &mut self,
+        now_us: u32,
+        out: &mut Frame,
+        may_grow: impl Fn(&[u8]) -> bool,
+        patience_us: u32,
+    ) -> bool {
+        let waiting = !self.overflow
+            && now_us.wrapping_sub(self.last_us) < patience_us
+            && may_grow(self.held());
+        !waiting && self.poll(now_us, out)
+    }
+
     /// The silence has been seen (a hardware receiver timeout fired): the frame held, moved
     /// into `out`, whatever the clock says; `false` if no bytes are held or the frame was too
     /// long (dropped).
@@ -792,6 +811,45 @@ mod tests {
         }
         assert!(f.take_if(&mut out, find));
         assert_eq!(&out[..], &frame[..]);
+        assert!(!f.busy());
+    }
+
+    #[test]
+    fn a_torn_frame_start_waits_for_its_patience_and_nothing_else_does() {
+        let mut f = RtuFramer::new(10_000);
+        let mut out = Frame::new();
+        // "May grow": starts with 1 and holds fewer than 4 bytes.
+        let may_grow = |b: &[u8]| b.first() == Some(&1) && b.len() < 4;
+        f.push(1, 0);
+        f.push(2, 0);
+        assert!(
+            !f.poll_patient(10_000, &mut out, may_grow, 500_000),
+            "past the gap"
+        );
+        assert!(!f.poll_patient(499_999, &mut out, may_grow, 500_000));
+        // The rest arrives: the silence ends it as usual.
+        f.push(3, 499_999);
+        f.push(4, 499_999);
+        assert!(!f.poll_patient(509_998, &mut out, may_grow, 500_000));
+        assert!(f.poll_patient(509_999, &mut out, may_grow, 500_000));
+        assert_eq!(&out[..], &[1, 2, 3, 4]);
+        // Given up at the patience, as by the silence (handed on).
+        f.push(1, 600_000);
+        assert!(f.poll_patient(1_100_000, &mut out, may_grow, 500_000));
+        assert_eq!(&out[..], &[1]);
+        // Bytes that cannot grow: the gap alone.
+        f.push(9, 2_000_000);
+        assert!(f.poll_patient(2_010_000, &mut out, may_grow, 500_000));
+        assert_eq!(&out[..], &[9]);
+        // A patience shorter than the gap: the gap.
+        f.push(1, 3_000_000);
+        assert!(!f.poll_patient(3_009_999, &mut out, may_grow, 0));
+        assert!(f.poll_patient(3_010_000, &mut out, may_grow, 0));
+        // Too long a frame is dropped at the gap, whatever its bytes.
+        for _ in 0..300 {
+            f.push(1, 4_000_000);
+        }
+        assert!(!f.poll_patient(4_010_000, &mut out, |_| true, 500_000));
         assert!(!f.busy());
     }
 

@@ -100,16 +100,37 @@ impl<TX: Write<u8>, RX: Read<u8>, DE: OutputPin> PortIsr<TX, RX, DE> {
     }
 }
 
-/// Where a whole frame starts at the end of the bytes held, found by its content (see
-/// [`RtuFramer::take_if`]).
-pub type FindFrame = fn(&[u8]) -> Option<usize>;
+/// How a port on a line that marks no silence (QEMU's) finds its frames by their content.
+#[derive(Debug, Clone, Copy)]
+pub struct ByContent {
+    /// Where a whole frame starts at the end of the bytes held ([`RtuFramer::take_if`]).
+    pub find: fn(&[u8]) -> Option<usize>,
+    /// `true` while the bytes held may still become a whole frame.
+    pub may_grow: fn(&[u8]) -> bool,
+    /// Silence after which bytes that may still grow are given up, µs: longer than the
+    /// port's silence, which drops any other bytes ([`RtuFramer::poll_patient`]).
+    pub patience_us: u32,
+}
+
+impl ByContent {
+    /// Modbus RTU requests ([`controller::modbus::request_at_end`]); one torn by a pause
+    /// (a busy host holding QEMU's bytes up) is waited for up to `patience_us`
+    /// ([`controller::modbus::request_may_grow`]).
+    pub const fn requests(patience_us: u32) -> Self {
+        Self {
+            find: controller::modbus::request_at_end,
+            may_grow: controller::modbus::request_may_grow,
+            patience_us,
+        }
+    }
+}
 
 /// A port's task side: frames out of the receive queue, frames into the transmit queue.
 pub struct PortTask {
     rx: Consumer<'static, u16>,
     tx: Producer<'static, Frame>,
     framer: RtuFramer,
-    by_content: Option<FindFrame>,
+    by_content: Option<ByContent>,
     pend: fn(),
     /// Time stamp for the bytes taken next, µs (wrapping).
     pub now_us: u32,
@@ -118,13 +139,14 @@ pub struct PortTask {
 impl PortTask {
     /// The task side of a port whose frames end at a [`GAP`] mark or after `silence_us`
     /// without a byte (timed from when this side takes them); with `by_content`, also by
-    /// their content (e.g. [`controller::modbus::request_at_end`], for a line that marks
-    /// no silence). `pend` pends the port's interrupt, which starts a queued frame.
+    /// their content (e.g. [`ByContent::requests`], for a line that marks no silence), and
+    /// a start of a frame is kept for its patience. `pend` pends the port's interrupt,
+    /// which starts a queued frame.
     pub fn new(
         rx: Consumer<'static, u16>,
         tx: Producer<'static, Frame>,
         silence_us: u32,
-        by_content: Option<FindFrame>,
+        by_content: Option<ByContent>,
         pend: fn(),
     ) -> Self {
         Self {
@@ -154,13 +176,18 @@ impl PortTask {
                 continue;
             }
             self.framer.push(e as u8, self.now_us);
-            if let Some(find) = self.by_content {
-                if self.framer.take_if(out, find) {
+            if let Some(c) = self.by_content {
+                if self.framer.take_if(out, c.find) {
                     return true;
                 }
             }
         }
-        self.framer.poll(self.now_us, out)
+        match self.by_content {
+            Some(c) => self
+                .framer
+                .poll_patient(self.now_us, out, c.may_grow, c.patience_us),
+            None => self.framer.poll(self.now_us, out),
+        }
     }
 
     /// The next received byte, for a port that carries text lines instead of RTU frames
@@ -236,7 +263,7 @@ impl VfdPort for PortTask {
 mod tests {
     use super::*;
     use controller::control::Config;
-    use controller::modbus::{crc16, request_at_end};
+    use controller::modbus::crc16;
     use controller::rtu::NoDe;
     use embedded_hal_nb::nb;
     use embedded_hal_nb::serial::{self, ErrorKind};
@@ -322,7 +349,7 @@ mod tests {
     /// A full-duplex port with queues of `R` entries and `T` frames, both sides.
     fn port<const R: usize, const T: usize>(
         silence_us: u32,
-        by_content: Option<FindFrame>,
+        by_content: Option<ByContent>,
     ) -> (Isr, PortTask, Rx, Tx) {
         let (rx_q, rx_c, tx_p, tx_c) = queues::<R, T>();
         let (rx, tx) = (Rx::default(), Tx::default());
@@ -500,7 +527,7 @@ mod tests {
 
     #[test]
     fn a_request_is_found_by_its_content_without_silence() {
-        let (mut isr, mut task, rx, _) = port::<64, 3>(10_000, Some(request_at_end));
+        let (mut isr, mut task, rx, _) = port::<64, 3>(10_000, Some(ByContent::requests(500_000)));
         let margin = Margin::new();
         let req = with_crc(&[1, 4, 0, 0, 0, 18]);
         rx.bytes(&[0x55]);
@@ -519,6 +546,43 @@ mod tests {
         assert_eq!(out[..], req[..]);
     }
 
+    #[test]
+    fn a_request_torn_by_a_pause_is_kept_for_its_patience() {
+        let (mut isr, mut task, rx, _) = port::<64, 3>(10_000, Some(ByContent::requests(500_000)));
+        let margin = Margin::new();
+        let req = with_crc(&[1, 4, 0, 0, 0, 18]);
+        let mut out = Frame::new();
+        // Half a request, then 0.4 s of silence (40 of the port's): kept, then whole.
+        rx.bytes(&req[..3]);
+        isr.on_interrupt(&margin);
+        assert!(!task.at(0).receive_frame(&mut out));
+        assert!(!task.at(400_000).receive_frame(&mut out));
+        rx.bytes(&req[3..]);
+        isr.on_interrupt(&margin);
+        assert!(task.at(400_000).receive_frame(&mut out));
+        assert_eq!(out[..], req[..]);
+        // Half a request never finished: given up at the patience, and the next is whole.
+        rx.bytes(&req[..5]);
+        isr.on_interrupt(&margin);
+        assert!(!task.at(1_000_000).receive_frame(&mut out));
+        assert!(!task.at(1_499_999).receive_frame(&mut out));
+        assert!(
+            task.at(1_500_000).receive_frame(&mut out),
+            "handed on, as by the silence"
+        );
+        assert_eq!(out[..], req[..5]);
+        rx.bytes(&req);
+        isr.on_interrupt(&margin);
+        assert!(task.at(1_500_001).receive_frame(&mut out));
+        assert_eq!(out[..], req[..]);
+        // Noise that cannot start a request: dropped at the port's silence.
+        rx.bytes(&[0x55, 0x99, 0x01]);
+        isr.on_interrupt(&margin);
+        assert!(!task.at(2_000_000).receive_frame(&mut out));
+        assert!(task.at(2_010_000).receive_frame(&mut out));
+        assert_eq!(out[..], [0x55, 0x99, 0x01]);
+    }
+
     /// A SCADA link of the bench configuration on a port that finds requests by their
     /// content, with a receive queue of `R` entries; `requests` requests for `registers`
     /// input registers received.
@@ -528,7 +592,7 @@ mod tests {
     ) -> (Config, ScadaLink, Isr, PortTask, Tx, Margin) {
         let config = Config::bench();
         let link = ScadaLink::new(&config).unwrap();
-        let (mut isr, task, rx, tx) = port::<R, 3>(10_000, Some(request_at_end));
+        let (mut isr, task, rx, tx) = port::<R, 3>(10_000, Some(ByContent::requests(500_000)));
         let margin = Margin::new();
         let req = with_crc(&[config.scada_unit, 4, 0, 0, 0, registers]);
         for _ in 0..requests {

@@ -19,6 +19,12 @@ pub const WAKE_HZ: u32 = 4000;
 /// guest reads the last one, with no line timing, and a busy host can delay a byte by a few
 /// milliseconds; 10 ms keeps frames whole and is far below any master's timeout.
 pub const QEMU_SILENCE_US: u32 = 10_000;
+/// Silence after which the start of a SCADA request is given up under QEMU, µs: in real
+/// time a busy host can hold QEMU's bytes up longer than [`QEMU_SILENCE_US`] inside one
+/// write (a request torn by 50 ms went unanswered, and a CI flood lost one so), while a
+/// master waits about 1 s for an answer (mbpoll's and the xtask checks' timeout). Bytes
+/// that cannot start a request are still dropped at [`QEMU_SILENCE_US`].
+pub const QEMU_REQUEST_PATIENCE_US: u32 = 1_000_000;
 
 /// Microseconds from TIM5 running free at 1 MHz (wraps every 71 min).
 pub fn now_us() -> u32 {
