@@ -196,16 +196,7 @@ pub const DRIVE_SLEW_RANGE_PCT_S: (f64, f64) = (10.0, 100_000.0);
 /// Parses `--drive-slew-pct-s R` (% of nominal torque per s): 0 (none), or finite within
 /// [`DRIVE_SLEW_RANGE_PCT_S`].
 pub fn parse_drive_slew(text: &str) -> Result<f64, String> {
-    let r = finite("--drive-slew-pct-s", text)?;
-    let (lo, hi) = DRIVE_SLEW_RANGE_PCT_S;
-    if r == 0.0 || (lo..=hi).contains(&r) {
-        Ok(r.abs())
-    } else {
-        Err(format!(
-            "--drive-slew-pct-s {}: must be 0 or within {lo}..{hi} %/s",
-            shown(text.trim())
-        ))
-    }
+    zero_or_in_range("--drive-slew-pct-s", text, DRIVE_SLEW_RANGE_PCT_S, " %/s")
 }
 
 /// Longest transport delay accepted ahead of the transmitters, ms.
@@ -227,14 +218,38 @@ impl Dynamics {
 
 /// `text` as a finite number within `lo..=hi`, or a one-line message naming `option` that
 /// shows the value as it was typed (3000, not 3e3) and the range in `unit` (" ms").
-fn in_range(option: &str, text: &str, (lo, hi): (f64, f64), unit: &str) -> Result<f64, String> {
+fn in_range(option: &str, text: &str, range: (f64, f64), unit: &str) -> Result<f64, String> {
+    within(option, text, range, unit, false)
+}
+
+/// As [`in_range`], but 0 (off) is accepted too, and given back as +0 (for "-0").
+fn zero_or_in_range(
+    option: &str,
+    text: &str,
+    range: (f64, f64),
+    unit: &str,
+) -> Result<f64, String> {
+    within(option, text, range, unit, true)
+}
+
+/// The rule of [`in_range`] and [`zero_or_in_range`] (`zero`: 0 accepted too).
+fn within(
+    option: &str,
+    text: &str,
+    (lo, hi): (f64, f64),
+    unit: &str,
+    zero: bool,
+) -> Result<f64, String> {
     let v = finite(option, text)?;
-    if (lo..=hi).contains(&v) {
+    if zero && v == 0.0 {
+        Ok(0.0)
+    } else if (lo..=hi).contains(&v) {
         Ok(v)
     } else {
         // The limits in plain notation (`Short` would write 2e3).
+        let or_zero = if zero { "0 or " } else { "" };
         Err(format!(
-            "{option} {}: must be within {lo}..{hi}{unit}",
+            "{option} {}: must be {or_zero}within {lo}..{hi}{unit}",
             shown(text.trim())
         ))
     }
@@ -288,15 +303,12 @@ fn parse_pct_pair(option: &str, text: &str, max_pct: f64) -> Result<(f64, f64), 
 /// Parses `--water-inertia L` (mca·s²/l): 0, or finite within
 /// [`INERTIA_MIN`]..=[`INERTIA_MAX`].
 pub fn parse_water_inertia(text: &str) -> Result<f64, String> {
-    let l = finite("--water-inertia", text)?;
-    if l == 0.0 || (INERTIA_MIN..=INERTIA_MAX).contains(&l) {
-        Ok(l.abs())
-    } else {
-        Err(format!(
-            "--water-inertia {}: must be 0 or within {INERTIA_MIN}..{INERTIA_MAX} mca·s²/l",
-            shown(text.trim())
-        ))
-    }
+    zero_or_in_range(
+        "--water-inertia",
+        text,
+        (INERTIA_MIN, INERTIA_MAX),
+        " mca·s²/l",
+    )
 }
 
 /// Parses `--rotor-inertia F` (× the paper's J): finite, within [`ROTOR_INERTIA_RANGE`].
