@@ -26,6 +26,19 @@ pub const QEMU_SILENCE_US: u32 = 10_000;
 /// that cannot start a request are still dropped at [`QEMU_SILENCE_US`].
 pub const QEMU_REQUEST_PATIENCE_US: u32 = 1_000_000;
 
+/// The SCADA port's task side under QEMU, from its receive queue's consumer `rx` and its
+/// transmit queue's producer `tx`: requests end by their content, or after
+/// [`QEMU_SILENCE_US`] (a request's start after [`QEMU_REQUEST_PATIENCE_US`]); `pend` pends
+/// USART1's interrupt.
+pub fn scada_port(
+    rx: heapless::spsc::Consumer<'static, u16>,
+    tx: heapless::spsc::Producer<'static, controller::modbus::Frame>,
+    pend: fn(),
+) -> board_common::port::PortTask {
+    let requests = board_common::port::ByContent::requests(QEMU_REQUEST_PATIENCE_US);
+    board_common::port::PortTask::new(rx, tx, QEMU_SILENCE_US, Some(requests), pend)
+}
+
 /// Microseconds from TIM5 running free at 1 MHz (wraps every 71 min).
 pub fn now_us() -> u32 {
     // SAFETY: a read of a free-running counter register; TIM5 is set up once in `init` and

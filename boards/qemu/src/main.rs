@@ -26,8 +26,9 @@
 //! - **The RTU silence** (3.5 characters): QEMU's serial lines carry no timing (a byte is
 //!   handed over as soon as the last one is read). SCADA requests end by their content
 //!   (length and CRC, [`controller::modbus::request_at_end`]) or after [`QEMU_SILENCE_US`],
-//!   a request's start after [`QEMU_REQUEST_PATIENCE_US`] (a busy host can hold a write's
-//!   bytes up for tens of ms); the Nucleo ends frames with a timer.
+//!   a request's start after [`board_qemu::QEMU_REQUEST_PATIENCE_US`] (a busy host can hold
+//!   a write's bytes up for tens of ms: [`board_qemu::scada_port`]); the Nucleo ends frames
+//!   with a timer.
 //! - **USART transmit interrupts** (TXE, TC) never fire: a frame is written out from the
 //!   handler that starts it (QEMU takes each byte at once).
 //! - **RCC PLL**: a PLL-ready wait hangs; the chip stays on its 16 MHz HSI (SysTick and the
@@ -40,9 +41,7 @@
 #![no_main]
 
 use board_common::RTU_BAUD as BAUD;
-use board_qemu::{
-    args, exit, now_ns, now_us, QEMU_REQUEST_PATIENCE_US, QEMU_SILENCE_US, QEMU_SYSTICK_HZ, WAKE_HZ,
-};
+use board_qemu::{args, exit, now_ns, now_us, QEMU_SILENCE_US, QEMU_SYSTICK_HZ, WAKE_HZ};
 use stm32f4xx_hal::pac;
 
 /// The timing margins of this run (TIM2 counts: instructions under `-icount shift=0`).
@@ -51,7 +50,7 @@ static MARGIN: board_common::Margin = board_common::Margin::new();
 #[rtic::app(device = stm32f4xx_hal::pac, peripherals = true, dispatchers = [EXTI0, EXTI1, EXTI2])]
 mod app {
     use super::*;
-    use board_common::port::{ByContent, PortIsr, PortTask, RX_QUEUE, TX_QUEUE};
+    use board_common::port::{PortIsr, PortTask, RX_QUEUE, TX_QUEUE};
     use board_common::tasks::{
         log_task, scada_server, vfd_master, vfd_pass, LogMsg, LogWait, ScadaWait, ScadaWake,
         StepLinks, VfdWait,
@@ -159,13 +158,7 @@ mod app {
         // QEMU's USARTs are full duplex (no echo) and have no driver-enable pin.
         let port1 = PortIsr::new(Rs485::full_duplex(tx1, rx1, NoDe), p1, ct1);
         let port2 = PortIsr::new(Rs485::full_duplex(tx2, rx2, NoDe), p2, ct2);
-        let scada_port = PortTask::new(
-            c1,
-            pt1,
-            QEMU_SILENCE_US,
-            Some(ByContent::requests(QEMU_REQUEST_PATIENCE_US)),
-            || rtic::pend(pac::Interrupt::USART1),
-        );
+        let scada_port = board_qemu::scada_port(c1, pt1, || rtic::pend(pac::Interrupt::USART1));
         let vfd_port = a.vfd_uart.then(|| {
             PortTask::new(c2, pt2, QEMU_SILENCE_US, None, || {
                 rtic::pend(pac::Interrupt::USART2)

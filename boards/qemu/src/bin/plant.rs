@@ -26,7 +26,7 @@
 #![no_main]
 
 use board_common::RTU_BAUD as BAUD;
-use board_qemu::{exit, now_ns, now_us, QEMU_REQUEST_PATIENCE_US, QEMU_SILENCE_US};
+use board_qemu::{exit, now_ns, now_us, QEMU_SILENCE_US};
 use stm32f4xx_hal::pac;
 
 /// How long the board waits after `Q`'s `B` before QEMU exits, ns of its clock (real time in
@@ -44,7 +44,7 @@ type ReplyLine = heapless::String<128>;
 #[rtic::app(device = stm32f4xx_hal::pac, peripherals = true, dispatchers = [EXTI0, EXTI1, EXTI2])]
 mod app {
     use super::*;
-    use board_common::port::{ByContent, PortIsr, PortTask, RX_QUEUE, TX_QUEUE};
+    use board_common::port::{PortIsr, PortTask, RX_QUEUE, TX_QUEUE};
     use board_common::tasks::{log_task, LogMsg, LogWait, ScadaWait, ScadaWake, StepLinks};
     use board_common::{record_max, Controller};
     use controller::modbus::Frame;
@@ -105,13 +105,7 @@ mod app {
         let (pt2, ct2) = cx.local.tx2.split();
         let port1 = PortIsr::new(Rs485::full_duplex(tx1, rx1, NoDe), p1, ct1);
         let port2 = PortIsr::new(Rs485::full_duplex(tx2, rx2, NoDe), p2, ct2);
-        let scada_port = PortTask::new(
-            c1,
-            pt1,
-            QEMU_SILENCE_US,
-            Some(ByContent::requests(QEMU_REQUEST_PATIENCE_US)),
-            || rtic::pend(pac::Interrupt::USART1),
-        );
+        let scada_port = board_qemu::scada_port(c1, pt1, || rtic::pend(pac::Interrupt::USART1));
         // Lines, not frames: the framer is unused (bytes are taken one by one).
         let plant_port = PortTask::new(c2, pt2, QEMU_SILENCE_US, None, || {
             rtic::pend(pac::Interrupt::USART2)
