@@ -44,6 +44,10 @@ pub struct RtuFramer {
     start: usize,
     len: usize,
     overflow: bool,
+    /// Where the bytes after a start kept past the gap by [`Self::poll_patient`] begin among
+    /// those held (0: none): [`Self::take_if`] looks there too, so that a start that never
+    /// grows whole does not hide the frames sent after it.
+    resumed: usize,
     last_us: u32,
     gap_us: u32,
 }
@@ -57,6 +61,7 @@ impl RtuFramer {
             start: 0,
             len: 0,
             overflow: false,
+            resumed: 0,
             last_us: 0,
             gap_us: if gap_us == 0 { 1 } else { gap_us },
         }
@@ -78,6 +83,7 @@ impl RtuFramer {
     fn clear(&mut self) {
         self.start = 0;
         self.len = 0;
+        self.resumed = 0;
     }
 
     /// Takes one received byte at time `now_us` (µs, any origin, wrapping). Past
@@ -88,6 +94,7 @@ impl RtuFramer {
             self.overflow = true;
             self.start = (self.start + 1) % HOLD;
             self.len -= 1;
+            self.resumed = self.resumed.saturating_sub(1);
         }
         let at = (self.start + self.len) % HOLD;
         self.ring[at] = byte;
@@ -104,10 +111,17 @@ impl RtuFramer {
     /// A whole frame at the end of the bytes held, found by its content: `find` gives where
     /// it starts (e.g. [`crate::modbus::request_at_end`]: a request whose length its function
     /// fixes, with a valid CRC). It is moved into `out` and whatever came before it (noise) is
-    /// dropped, without waiting for the silence. `false` otherwise (bytes kept).
+    /// dropped, without waiting for the silence. If none is found in all the bytes held, the
+    /// bytes after a start that [`Self::poll_patient`] kept past the gap are looked at alone
+    /// (the start may claim more bytes than follow it). `false` otherwise (bytes kept).
     pub fn take_if(&mut self, out: &mut Frame, find: impl Fn(&[u8]) -> Option<usize>) -> bool {
         let held = self.held();
-        let Some(frame) = find(held).and_then(|start| held.get(start..)) else {
+        let since = self.resumed;
+        let at = find(held).or_else(|| {
+            let after = held.get(since..).filter(|_| since > 0)?;
+            find(after).map(|start| start + since)
+        });
+        let Some(frame) = at.and_then(|start| held.get(start..)) else {
             return false;
         };
         out.clear();
@@ -134,7 +148,8 @@ impl RtuFramer {
     /// `patience_us` µs of silence (taken as at least [`Self::gap_us`]): on a line whose bytes
     /// can be held up longer than the silence inside a frame (QEMU's, behind a busy host), a
     /// torn request is still answered, while bytes that cannot become one are dropped as
-    /// soon as by [`Self::poll`].
+    /// soon as by [`Self::poll`]. A start kept so that never grows whole does not hide the
+    /// frames sent after the pause: [`Self::take_if`] looks at the bytes since it alone too.
     pub fn poll_patient(
         &mut self,
         now_us: u32,
@@ -142,10 +157,15 @@ impl RtuFramer {
         may_grow: impl Fn(&[u8]) -> bool,
         patience_us: u32,
     ) -> bool {
-        let waiting = !self.overflow
-            && now_us.wrapping_sub(self.last_us) < patience_us
-            && may_grow(self.held());
-        !waiting && self.poll(now_us, out)
+        let quiet = now_us.wrapping_sub(self.last_us);
+        if !self.overflow && quiet < patience_us && may_grow(self.held()) {
+            if quiet >= self.gap_us {
+                // Kept past the gap: what comes next is looked at alone too.
+                self.resumed = self.len;
+            }
+            return false;
+        }
+        self.poll(now_us, out)
     }
 
     /// The silence has been seen (a hardware receiver timeout fired): the frame held, moved
@@ -850,6 +870,56 @@ mod tests {
             f.push(1, 4_000_000);
         }
         assert!(!f.poll_patient(4_010_000, &mut out, |_| true, 500_000));
+        assert!(!f.busy());
+    }
+
+    #[test]
+    fn a_kept_start_does_not_hide_a_whole_frame_after_a_pause() {
+        let mut f = RtuFramer::new(10_000);
+        let mut out = Frame::new();
+        // "Whole": all the bytes looked at, if they end with 7, 8, 9 and do not start with 1
+        // (a start that claims every byte after it).
+        let find = |b: &[u8]| (b.first() != Some(&1) && b.ends_with(&[7, 8, 9])).then_some(0);
+        for b in [1, 2] {
+            f.push(b, 0);
+        }
+        assert!(
+            !f.poll_patient(20_000, &mut out, |_| true, 1_000_000),
+            "kept"
+        );
+        // A whole frame after the pause: found in the bytes since it, the start dropped.
+        for b in [7, 8] {
+            f.push(b, 30_000);
+            assert!(!f.take_if(&mut out, find));
+        }
+        f.push(9, 30_000);
+        assert!(f.take_if(&mut out, find));
+        assert_eq!(&out[..], &[7, 8, 9]);
+        assert!(!f.busy());
+        // Without a pause, the start still claims what follows (as before).
+        for b in [1, 2, 7, 8, 9] {
+            f.push(b, 40_000);
+        }
+        assert!(!f.take_if(&mut out, find));
+        assert!(f.poll(50_000, &mut out), "ended by the silence");
+        // A long start kept, then more bytes than the ring has room for: the place where
+        // they begin follows the ring as it drops its oldest bytes.
+        for _ in 0..200 {
+            f.push(1, 60_000);
+        }
+        assert!(
+            !f.poll_patient(70_000, &mut out, |_| true, 1_000_000),
+            "kept"
+        );
+        for _ in 0..100 {
+            f.push(0x55, 80_000);
+        }
+        for b in [7, 8, 9] {
+            f.push(b, 80_000);
+        }
+        assert!(f.take_if(&mut out, find));
+        assert_eq!(out.len(), 103, "from the first byte after the pause");
+        assert_eq!(&out[..2], &[0x55, 0x55]);
         assert!(!f.busy());
     }
 

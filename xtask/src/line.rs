@@ -199,6 +199,13 @@ pub fn checks(pty: &str, bridge: &Bridge, report: &mut String) -> Result {
         return Err(format!("a request torn by a 100 ms pause: got {back:02x?}"));
     }
     report.push_str("a request torn by a 100 ms pause: answered\n");
+    // The start of a long write that never comes whole (a write's first 7 bytes claiming
+    // 209), a pause, then a read: the read is answered, not taken for the write's data.
+    port.send(&[1, 16, 0, 0, 0, 100, 200])?;
+    std::thread::sleep(Duration::from_millis(100));
+    port.inputs(17, 1, Duration::from_secs(1))?
+        .ok_or("no answer within 1 s to a read after the start of a write that never came whole")?;
+    report.push_str("the start of a write that never came whole, 100 ms, a read: answered\n");
     drop(port);
     // 4. A client that sends and never reads (answers pile up: 25 KB in 12 s) does not
     //    stop the controller.

@@ -575,6 +575,16 @@ mod tests {
         isr.on_interrupt(&margin);
         assert!(task.at(1_500_001).receive_frame(&mut out));
         assert_eq!(out[..], req[..]);
+        // The start of a long write that never grows whole, then a read after a pause: the
+        // read is answered at once, not hidden in the bytes the write claims.
+        rx.bytes(&[1, 16, 0, 0, 0, 100, 200]);
+        isr.on_interrupt(&margin);
+        assert!(!task.at(1_600_000).receive_frame(&mut out));
+        assert!(!task.at(1_700_000).receive_frame(&mut out), "kept");
+        rx.bytes(&req);
+        isr.on_interrupt(&margin);
+        assert!(task.at(1_700_000).receive_frame(&mut out));
+        assert_eq!(out[..], req[..]);
         // Noise that cannot start a request: dropped at the port's silence.
         rx.bytes(&[0x55, 0x99, 0x01]);
         isr.on_interrupt(&margin);

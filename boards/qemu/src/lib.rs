@@ -23,7 +23,8 @@ pub const QEMU_SILENCE_US: u32 = 10_000;
 /// time a busy host can hold QEMU's bytes up longer than [`QEMU_SILENCE_US`] inside one
 /// write (a request torn by 50 ms went unanswered, and a CI flood lost one so), while a
 /// master waits about 1 s for an answer (mbpoll's and the xtask checks' timeout). Bytes
-/// that cannot start a request are still dropped at [`QEMU_SILENCE_US`].
+/// that cannot start a request by their form
+/// ([`controller::modbus::request_may_grow`]) are still dropped at [`QEMU_SILENCE_US`].
 pub const QEMU_REQUEST_PATIENCE_US: u32 = 1_000_000;
 
 /// The SCADA port's task side under QEMU, from its receive queue's consumer `rx` and its
