@@ -16,11 +16,11 @@
 //! silent for [`QUIET_MS`] after that (answers still on their way to the client that left are
 //! dropped), the next client's bytes wait; so a client sees only answers to its own requests,
 //! unless the controller took longer than [`QUIET_MS`] to answer the one that left, or the
-//! one that left opened, wrote and closed unread, and the next opened, all within one 2 ms
-//! poll: a pty shows no close that is followed by an open before the bridge looks, and
-//! both requests then go through (a review saw it in 811 of 3 000 such pairs made 0..4 ms
-//! apart; clients that read their answers, as `mbpoll` and the line checks do, are not
-//! concerned).
+//! one that left opened, wrote and closed unread, and the next opened, all within one pass
+//! of the bridge's loop (2 ms; longer when the host is busy): a pty shows no close that is
+//! followed by an open before the bridge looks, and both requests then go through (a
+//! review saw it in 811 of 3 000 such pairs made 0..4 ms apart; clients that read their
+//! answers, as `mbpoll` does, are not concerned).
 
 use crate::util::Result;
 use nix::fcntl::{open, OFlag};
@@ -63,6 +63,9 @@ pub struct Stats {
     pub dropped_after_close: AtomicU64,
     /// Clients that connected and left.
     pub sessions: AtomicU64,
+    /// Passes of the bridge's loop begun (each looks once whether a client is connected, at
+    /// its start): a close followed by two more passes has been seen.
+    pub passes: AtomicU64,
 }
 
 impl Stats {
@@ -196,13 +199,16 @@ fn run(
     // Set when a client leaves: the last time QEMU was heard since (or the leaving).
     let mut quarantine: Option<Instant> = None;
     while !stop.load(Ordering::Relaxed) {
+        stats.passes.fetch_add(1, Ordering::Relaxed);
         let now_connected = client_connected(&master);
         if connected && !now_connected {
             stats.sessions.fetch_add(1, Ordering::Relaxed);
             stats
                 .flushed_on_close
                 .fetch_add(flush_unread(path), Ordering::Relaxed);
-            // A request left half-sent by the client that left is not the next one's.
+            // A request left half-sent (or held back, see below) by the client that left is
+            // not the next one's.
+            add(&stats.dropped_from_gone, to_qemu.len());
             to_qemu.clear();
             quarantine = Some(Instant::now());
         }
