@@ -1515,10 +1515,11 @@ pub fn command(a: ControlArgs) -> Result<(), Failure> {
         Short(o.curve_error.torque_shape_pct + 0.0),
         Short(o.rotor_inertia),
         Short(o.dynamics.water_inertia),
-        Short(o.dynamics.drive_lag_s * 1000.0),
-        Short(o.pressure_lag_s * 1000.0),
-        Short(o.flow_lag_s * 1000.0),
-        Short(o.speed_lag_s * 1000.0),
+        // Times in ms, plain: "1000 ms", not `Short`'s "1e3 ms" (a human reads this line).
+        o.dynamics.drive_lag_s * 1000.0,
+        o.pressure_lag_s * 1000.0,
+        o.flow_lag_s * 1000.0,
+        o.speed_lag_s * 1000.0,
         rarer_plant_text(&o),
         o.seed
     );
@@ -1543,13 +1544,10 @@ pub fn command(a: ControlArgs) -> Result<(), Failure> {
 fn rarer_plant_text(o: &PlantOptions) -> String {
     let mut t = String::new();
     if o.dynamics.drive_slew_pct_s > 0.0 {
-        t += &format!(", drive ramp {} %/s", Short(o.dynamics.drive_slew_pct_s));
+        t += &format!(", drive ramp {} %/s", o.dynamics.drive_slew_pct_s);
     }
     if o.transmitter_delay_s > 0.0 {
-        t += &format!(
-            ", transmitter delay {} ms",
-            Short(o.transmitter_delay_s * 1000.0)
-        );
+        t += &format!(", transmitter delay {} ms", o.transmitter_delay_s * 1000.0);
     }
     t
 }

@@ -637,6 +637,40 @@ fn a_transport_delay_is_read_as_lag_and_the_steps_hold() {
     }
 }
 
+/// The plant line prints its times and rates as a person writes them: "1000 ms", not the
+/// CSV's shortest form "1e3 ms".
+#[test]
+fn the_plant_line_prints_plain_numbers() {
+    let out = pumpbench(&[
+        "control",
+        "--scenario",
+        "pressure-steps",
+        "--controller",
+        "pi",
+        "--hold-s",
+        "0.5",
+        "--pressure-lag-ms",
+        "1000",
+        "--drive-lag-ms",
+        "2000",
+        "--drive-slew-pct-s",
+        "1000",
+        "--transmitter-delay-ms",
+        "1000",
+    ]);
+    let stdout = ok(&out, "control");
+    let plant = stdout.lines().next().unwrap_or_default();
+    for shown in [
+        "drive lag 2000 ms",
+        "pressure lag 1000 ms",
+        "drive ramp 1000 %/s",
+        "transmitter delay 1000 ms",
+    ] {
+        assert!(plant.contains(shown), "{shown:?} not in: {plant}");
+    }
+    assert!(!plant.contains("e3"), "{plant}");
+}
+
 /// `pumpbench control --scenario pressure-steps --controller model` with `extra` options.
 fn model_pressure_steps(extra: &[&str]) -> std::process::Output {
     let mut args = vec![
