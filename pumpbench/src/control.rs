@@ -780,9 +780,6 @@ pub fn run(
         }
         last_torque = Some(reply.torque_ref_pct);
         trace.measured_lag_s = c.measured_lag_s();
-        if std::env::var("LAGTRACE").is_ok() && t % 50 == 0 {
-            eprintln!("LAG {} {:?}", t, c.measured_lag_s());
-        }
         trace.inertia_factor = c.inertia_factor();
         trace.drive_lag_s = c.drive_lag_s();
         trace.speed_lag_s = c.speed_lag_s();
@@ -1159,7 +1156,7 @@ pub fn report(
         let _ = writeln!(
             s,
             "{}: torque NaN steps {}, outside its limits {}, largest change into a period with \
-             the link up {:.1} %/s; measured plant lag: pressure {:.0} ms, flow {:.0} ms; \
+             the link up {:.1} %/s; measured plant lag: pressure {:.0} ms{}, flow {:.0} ms{}; \
              rotor inertia measured: {:.2} × the paper's; drive lag measured: {:.0} ms; speed \
              reading lag measured: {:.0} ms; tripped \
              (a protection's 0 %) {:.3} s",
@@ -1168,7 +1165,9 @@ pub fn report(
             trace.out_of_limits,
             trace.max_rate_pct_per_s,
             trace.measured_lag_s[0] * 1000.0,
+            none_shown(trace.measured_lag_s[0]),
             trace.measured_lag_s[1] * 1000.0,
+            none_shown(trace.measured_lag_s[1]),
             trace.inertia_factor,
             trace.drive_lag_s * 1000.0,
             trace.speed_lag_s * 1000.0,
@@ -1537,6 +1536,17 @@ pub fn command(a: ControlArgs) -> Result<(), Failure> {
         report(&scenario, &plant_text, &runs, a.targets, truth)
     );
     Ok(())
+}
+
+/// After a lag the probe reports as 0: what that 0 says. The probe keeps 0 until a setpoint
+/// step shows a lag, and behind a transmitter slower than it can follow it never does
+/// (docs/control.md, Limits): "0 ms" alone would read as a plant without lag.
+fn none_shown(lag_s: f32) -> &'static str {
+    if lag_s == 0.0 {
+        " (none shown by a setpoint step)"
+    } else {
+        ""
+    }
 }
 
 /// The plant options printed only when set (the plant line of the plants without them as it

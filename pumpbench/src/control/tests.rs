@@ -483,3 +483,11 @@ fn a_lift_told_to_register_20_takes_the_overshoot_away() {
     assert!(untold[0] > 2.0 && untold[1] > 2.0, "{untold:?}");
     assert!(told[0] < 1.0 && told[1] < 1.0, "{told:?}");
 }
+
+/// A lag of 0 is printed with what it means (no setpoint step showed one), not as a plant
+/// without lag; a measured lag alone.
+#[test]
+fn a_lag_of_zero_says_none_was_shown() {
+    assert_eq!(none_shown(0.0), " (none shown by a setpoint step)");
+    assert_eq!(none_shown(0.08), "");
+}
