@@ -282,6 +282,58 @@ mod tests {
         assert_eq!(a, b);
     }
 
+    /// The firmware's pulses are fixed: the first six changes of seed 3 (time, ms; torque,
+    /// f32 bits) on steps of 0 (taken as 1), 1, 5 and 7 ms, as the code made them before
+    /// its step became a `NonZeroU32` (printed by that code, 6bdaa2d). A change here changes
+    /// every excitation recorded with a seed.
+    #[test]
+    fn mcu_pulses_are_pinned() {
+        let first = [(0, 1096890212), (2250, 1113073378), (2932, 1102218592)];
+        let then = [(5022, 1098710167), (7743, 1110516693), (10464, 1114865636)];
+        let pinned: [(u32, [(u32, u32); 6]); 4] = [
+            (0, [first[0], first[1], first[2], then[0], then[1], then[2]]),
+            (1, [first[0], first[1], first[2], then[0], then[1], then[2]]),
+            (
+                5,
+                [
+                    (0, 1096890212),
+                    (2250, 1113073378),
+                    (2930, 1102218592),
+                    (5020, 1098710167),
+                    (7740, 1110516693),
+                    (10460, 1114865636),
+                ],
+            ),
+            (
+                7,
+                [
+                    (0, 1096890212),
+                    (2247, 1113073378),
+                    (2926, 1102218592),
+                    (5019, 1098710167),
+                    (7742, 1110516693),
+                    (10465, 1114865636),
+                ],
+            ),
+        ];
+        for (step, changes) in pinned {
+            let mut seen = [(0u32, 0u32); 6];
+            let mut n = 0;
+            let mut last = f32::NAN;
+            for (t, u) in McuPulses::paper(3, step).take(40_000) {
+                if u.to_bits() != last.to_bits() {
+                    seen[n] = (t, u.to_bits());
+                    n += 1;
+                    last = u;
+                    if n == 6 {
+                        break;
+                    }
+                }
+            }
+            assert_eq!(seen, changes, "step {step} ms");
+        }
+    }
+
     #[test]
     fn holds_round_to_the_period() {
         let mut t = PulseTrain::paper(1);

@@ -1165,9 +1165,9 @@ pub fn report(
             trace.out_of_limits,
             trace.max_rate_pct_per_s,
             trace.measured_lag_s[0] * 1000.0,
-            none_shown(trace.measured_lag_s[0]),
+            none_shown(trace.law, trace.measured_lag_s[0]),
             trace.measured_lag_s[1] * 1000.0,
-            none_shown(trace.measured_lag_s[1]),
+            none_shown(trace.law, trace.measured_lag_s[1]),
             trace.inertia_factor,
             trace.drive_lag_s * 1000.0,
             trace.speed_lag_s * 1000.0,
@@ -1514,11 +1514,11 @@ pub fn command(a: ControlArgs) -> Result<(), Failure> {
         Short(o.curve_error.torque_shape_pct + 0.0),
         Short(o.rotor_inertia),
         Short(o.dynamics.water_inertia),
-        // Times in ms, plain: "1000 ms", not `Short`'s "1e3 ms" (a human reads this line).
-        o.dynamics.drive_lag_s * 1000.0,
-        o.pressure_lag_s * 1000.0,
-        o.flow_lag_s * 1000.0,
-        o.speed_lag_s * 1000.0,
+        // Times in ms as a person writes them (`plain`).
+        plain(o.dynamics.drive_lag_s * 1000.0),
+        plain(o.pressure_lag_s * 1000.0),
+        plain(o.flow_lag_s * 1000.0),
+        plain(o.speed_lag_s * 1000.0),
         rarer_plant_text(&o),
         o.seed
     );
@@ -1538,14 +1538,22 @@ pub fn command(a: ControlArgs) -> Result<(), Failure> {
     Ok(())
 }
 
-/// After a lag the probe reports as 0: what that 0 says. The probe keeps 0 until a setpoint
-/// step shows a lag, and behind a transmitter slower than it can follow it never does
-/// (docs/control.md, Limits): "0 ms" alone would read as a plant without lag.
-fn none_shown(lag_s: f32) -> &'static str {
-    if lag_s == 0.0 {
-        " (none shown by a setpoint step)"
-    } else {
-        ""
+/// A value of the plant line as a person writes it: rounded to 1e-6 (a lag typed in ms is
+/// kept in s: 1001 ms came back as 1000.9999999999999), +0 for -0, and plain (`{}`, not
+/// `Short`'s exponent form: "1000 ms", not "1e3 ms"; the options' ranges keep it short).
+fn plain(x: f64) -> f64 {
+    (x * 1e6).round() / 1e6 + 0.0
+}
+
+/// After a lag the probe reports as 0: what that 0 says. The model law's probe keeps 0 until
+/// a setpoint step shows a lag (behind a transmitter slower than it can follow it never
+/// does: docs/control.md, Limits), and the PI alone runs no probe: "0 ms" alone would read
+/// as a plant without lag.
+fn none_shown(law: Law, lag_s: f32) -> &'static str {
+    match law {
+        Law::Pi => " (the PI alone measures none)",
+        Law::Model if lag_s == 0.0 => " (none shown by a setpoint step)",
+        Law::Model => "",
     }
 }
 
@@ -1554,10 +1562,13 @@ fn none_shown(lag_s: f32) -> &'static str {
 fn rarer_plant_text(o: &PlantOptions) -> String {
     let mut t = String::new();
     if o.dynamics.drive_slew_pct_s > 0.0 {
-        t += &format!(", drive ramp {} %/s", o.dynamics.drive_slew_pct_s);
+        t += &format!(", drive ramp {} %/s", plain(o.dynamics.drive_slew_pct_s));
     }
     if o.transmitter_delay_s > 0.0 {
-        t += &format!(", transmitter delay {} ms", o.transmitter_delay_s * 1000.0);
+        t += &format!(
+            ", transmitter delay {} ms",
+            plain(o.transmitter_delay_s * 1000.0)
+        );
     }
     t
 }

@@ -488,6 +488,24 @@ fn a_lift_told_to_register_20_takes_the_overshoot_away() {
 /// without lag; a measured lag alone.
 #[test]
 fn a_lag_of_zero_says_none_was_shown() {
-    assert_eq!(none_shown(0.0), " (none shown by a setpoint step)");
-    assert_eq!(none_shown(0.08), "");
+    assert_eq!(
+        none_shown(Law::Model, 0.0),
+        " (none shown by a setpoint step)"
+    );
+    assert_eq!(none_shown(Law::Model, 0.08), "");
+    assert_eq!(none_shown(Law::Pi, 0.0), " (the PI alone measures none)");
+}
+
+/// The plant line's numbers: as typed, not as the ms → s → ms round trip left them.
+#[test]
+fn plant_line_numbers_are_plain() {
+    for (typed, shown) in [
+        (1001.0, "1001"),
+        (63.7, "63.7"),
+        (-0.0, "0"),
+        (1000.0, "1000"),
+    ] {
+        assert_eq!(plain(typed / 1000.0 * 1000.0).to_string(), shown, "{typed}");
+    }
+    assert_ne!((1001.0f64 / 1000.0 * 1000.0).to_string(), "1001");
 }
