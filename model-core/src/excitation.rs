@@ -288,49 +288,27 @@ mod tests {
     /// every excitation recorded with a seed.
     #[test]
     fn mcu_pulses_are_pinned() {
-        let first = [(0, 1096890212), (2250, 1113073378), (2932, 1102218592)];
-        let then = [(5022, 1098710167), (7743, 1110516693), (10464, 1114865636)];
-        let pinned: [(u32, [(u32, u32); 6]); 4] = [
-            (0, [first[0], first[1], first[2], then[0], then[1], then[2]]),
-            (1, [first[0], first[1], first[2], then[0], then[1], then[2]]),
-            (
-                5,
-                [
-                    (0, 1096890212),
-                    (2250, 1113073378),
-                    (2930, 1102218592),
-                    (5020, 1098710167),
-                    (7740, 1110516693),
-                    (10460, 1114865636),
-                ],
-            ),
-            (
-                7,
-                [
-                    (0, 1096890212),
-                    (2247, 1113073378),
-                    (2926, 1102218592),
-                    (5019, 1098710167),
-                    (7742, 1110516693),
-                    (10465, 1114865636),
-                ],
-            ),
+        // The torques (f32 bits) are the same for every step; their times round to it.
+        let bits = [
+            1096890212, 1113073378, 1102218592, 1098710167, 1110516693, 1114865636,
         ];
-        for (step, changes) in pinned {
-            let mut seen = [(0u32, 0u32); 6];
-            let mut n = 0;
+        let times: [(u32, [u32; 6]); 4] = [
+            (0, [0, 2250, 2932, 5022, 7743, 10464]),
+            (1, [0, 2250, 2932, 5022, 7743, 10464]),
+            (5, [0, 2250, 2930, 5020, 7740, 10460]),
+            (7, [0, 2247, 2926, 5019, 7742, 10465]),
+        ];
+        for (step, at) in times {
+            let mut changes = Vec::new();
             let mut last = f32::NAN;
             for (t, u) in McuPulses::paper(3, step).take(40_000) {
                 if u.to_bits() != last.to_bits() {
-                    seen[n] = (t, u.to_bits());
-                    n += 1;
+                    changes.push((t, u.to_bits()));
                     last = u;
-                    if n == 6 {
-                        break;
-                    }
                 }
             }
-            assert_eq!(seen, changes, "step {step} ms");
+            let pinned: Vec<_> = at.into_iter().zip(bits).collect();
+            assert_eq!(changes[..6], pinned[..], "step {step} ms");
         }
     }
 

@@ -1507,14 +1507,13 @@ pub fn command(a: ControlArgs) -> Result<(), Failure> {
     let plant_text = format!(
         "plant: curve error {},{} %, curve shape {},{} %, rotor inertia {} × the paper's, water inertia {} mca·s²/l, \
          drive lag {} ms, pressure lag {} ms, flow lag {} ms, speed reading lag {} ms{}, seed {}",
-        // (+ 0.0: a curve error of 0 is written 0, not -0.)
-        Short(o.curve_error.head_pct + 0.0),
-        Short(o.curve_error.torque_pct + 0.0),
-        Short(o.curve_error.head_shape_pct + 0.0),
-        Short(o.curve_error.torque_shape_pct + 0.0),
-        Short(o.rotor_inertia),
-        Short(o.dynamics.water_inertia),
-        // Times in ms as a person writes them (`plain`).
+        // Every number as a person writes it (`plain`).
+        plain(o.curve_error.head_pct),
+        plain(o.curve_error.torque_pct),
+        plain(o.curve_error.head_shape_pct),
+        plain(o.curve_error.torque_shape_pct),
+        plain(o.rotor_inertia),
+        plain(o.dynamics.water_inertia),
         plain(o.dynamics.drive_lag_s * 1000.0),
         plain(o.pressure_lag_s * 1000.0),
         plain(o.flow_lag_s * 1000.0),
@@ -1538,9 +1537,10 @@ pub fn command(a: ControlArgs) -> Result<(), Failure> {
     Ok(())
 }
 
-/// A value of the plant line as a person writes it: rounded to 1e-6 (a lag typed in ms is
-/// kept in s: 1001 ms came back as 1000.9999999999999), +0 for -0, and plain (`{}`, not
-/// `Short`'s exponent form: "1000 ms", not "1e3 ms"; the options' ranges keep it short).
+/// A number of the plant line as a person writes it: rounded to 1e-6 (a lag typed in ms is
+/// kept in s: 1001 ms came back as 1000.9999999999999), +0 for -0 (a curve error of 0 is
+/// written 0), and plain (`{}`, not `Short`'s exponent form: "1000 ms", not "1e3 ms";
+/// "0.001 mca·s²/l", not "1e-3"; the options' ranges keep it short).
 fn plain(x: f64) -> f64 {
     (x * 1e6).round() / 1e6 + 0.0
 }

@@ -88,11 +88,17 @@ impl Stats {
 
     /// Bytes dropped in all (never delivered).
     pub fn dropped(&self) -> u64 {
-        self.dropped_no_client.load(Ordering::Relaxed)
-            + self.dropped_after_close.load(Ordering::Relaxed)
-            + self.dropped_not_read.load(Ordering::Relaxed)
+        self.dropped_from_qemu()
             + self.dropped_to_qemu.load(Ordering::Relaxed)
             + self.dropped_from_gone.load(Ordering::Relaxed)
+    }
+
+    /// Bytes from QEMU dropped, reaching no client (after a close, on a port full or gone,
+    /// with no client connected): [`Stats::dropped`]'s share of the controller's answers.
+    pub fn dropped_from_qemu(&self) -> u64 {
+        self.dropped_after_close.load(Ordering::Relaxed)
+            + self.dropped_not_read.load(Ordering::Relaxed)
+            + self.dropped_no_client.load(Ordering::Relaxed)
     }
 }
 
