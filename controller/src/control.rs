@@ -46,7 +46,9 @@ use model_core::monitor::{Monitor, MonitorConfig, MonitorInputs};
 use model_core::narmax::adapt::OutputMap;
 use model_core::narmax::mcu::{NarxF32, NarxF32State, NarxQ15, NarxQ15State, MAX_PERIOD_MS};
 use model_core::narmax::{NarmaxError, NarmaxOutput, Predictor, Scaling};
-use model_core::observer::{Measurements, Observer, ObserverConfig, ObserverError};
+use model_core::observer::{
+    Measurements, Observer, ObserverConfig, ObserverError, PAPER_PRESSURE_LAG_S,
+};
 use model_core::{BenchError, BenchState, Scheme, Signals, WhiteBox};
 
 /// Step period, ms: one [`Controller::step`].
@@ -82,6 +84,23 @@ pub const MODEL_FAULT_SHOWN_MS: u32 = 2000;
 /// The largest static head the models take, either sign, mca ([`Commands::static_head_mca`];
 /// holding register 20 in 0.001 mca).
 pub const STATIC_HEAD_MAX_MCA: f32 = 10.0;
+
+/// What holding register 15's default (80 ms) allows beyond the pressure transmitter the
+/// observer models of its own (20 ms, `ObserverConfig::paper`), s: the drive's lag and a
+/// margin, which the observer models apart ([`observer_pressure_lag_s`]).
+pub const OBSERVER_LAG_ALLOWANCE_S: f32 = 0.06;
+
+/// The pressure transmitter's lag the observer models, s: register 15's lag (`register_s`,
+/// [`ControlSettings::pressure_lag_s`]) less [`OBSERVER_LAG_ALLOWANCE_S`], at least the 20 ms
+/// of `ObserverConfig::paper` ([`PAPER_PRESSURE_LAG_S`]). Behind a transmitter much slower
+/// than the observer's, the observer reads the reading's delay as the valve moving (its k2
+/// over 10 % off during a setpoint step): the loop's probe takes its lesson for a valve step
+/// and undoes it, and the feedforward carries a wrong load (docs/control.md, Limits). The
+/// lag the loop measures is not taken: it changes during a step, and an observer following
+/// it settled some steps later than the PI alone on the random plants (same place).
+pub fn observer_pressure_lag_s(register_s: f32) -> f32 {
+    (register_s - OBSERVER_LAG_ALLOWANCE_S).max(PAPER_PRESSURE_LAG_S as f32)
+}
 
 /// One 1 ms white-box step with the applied torque `u` (finite, 0..=100 %); `false` if it
 /// failed, which can only mean a diverged state: the step leaves it unchanged, so it would
@@ -722,6 +741,17 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
         }
     }
 
+    /// The observer takes the pressure transmitter's lag of [`observer_pressure_lag_s`]
+    /// (register 15's `register_s`) when it changed.
+    #[inline(never)]
+    fn follow_pressure_lag(&mut self, register_s: f32) {
+        let lag = observer_pressure_lag_s(register_s);
+        if lag != self.observer.config().pressure_lag_s {
+            // (A refused lag, NaN, leaves the observer's.)
+            let _ = self.observer.set_pressure_lag_s(lag);
+        }
+    }
+
     /// Time of the next step, ms (steps since start).
     pub fn now_ms(&self) -> u32 {
         self.t_ms
@@ -1164,7 +1194,14 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
         if c != self.whitebox.params().static_head_c_mca {
             self.take_static_head(c);
         }
-        let control = self.control_due();
+        let on_phase = now % CONTROL_PERIOD_MS == CONTROL_PHASE_MS;
+        if on_phase {
+            // On the loops' phase, never an observer step's tick: the observer's constants
+            // computed again there leave the tick's worst case where it was.
+            self.follow_pressure_lag(inp.commands.control.pressure_lag_s);
+        }
+        // (`control_due`, its phase computed once.)
+        let control = self.regulating && on_phase;
         let take_p = now.is_multiple_of(self.pressure.period_ms);
         let take_q = now.is_multiple_of(self.flow.period_ms);
         self.hold = self.protect(inp);
@@ -1380,6 +1417,23 @@ mod tests {
             c.take_static_head(good);
             assert_eq!(held(&c), (good, good));
         }
+    }
+
+    /// The observer's pressure lag: register 15's default gives `ObserverConfig::paper`'s
+    /// (the allowance is the difference), a longer register its lag less the allowance, a
+    /// shorter one no less than the paper's.
+    #[test]
+    fn the_observers_pressure_lag_follows_register_15() {
+        let paper = ObserverConfig::<f32>::paper().pressure_lag_s;
+        let default = ControlSettings::DEFAULT.pressure_lag_s;
+        assert!((default - OBSERVER_LAG_ALLOWANCE_S - paper).abs() < 1e-6);
+        assert_eq!(observer_pressure_lag_s(default), paper);
+        assert_eq!(observer_pressure_lag_s(0.0), paper);
+        assert_eq!(observer_pressure_lag_s(0.3), 0.3 - OBSERVER_LAG_ALLOWANCE_S);
+        assert_eq!(
+            observer_pressure_lag_s(10.0),
+            10.0 - OBSERVER_LAG_ALLOWANCE_S
+        );
     }
 
     const S: Scaling<f32> = Scaling {

@@ -5,6 +5,10 @@ use crate::params::BenchParams;
 use crate::scalar::Real;
 use crate::BenchError;
 
+/// The pressure transmitter's lag [`ObserverConfig::paper`] models, s (this project's
+/// transmitters).
+pub const PAPER_PRESSURE_LAG_S: f64 = 0.020;
+
 /// Tuning of the observer. Noise densities are per second of the random walk (variance grows
 /// by `psd · dt`); standard deviations in the state's unit.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -74,7 +78,7 @@ impl<T: Real> ObserverConfig<T> {
         let f = T::from_f64;
         Self {
             params: BenchParams::paper(),
-            pressure_lag_s: f(0.020),
+            pressure_lag_s: f(PAPER_PRESSURE_LAG_S),
             flow_lag_s: f(0.120),
             pressure_lag_sd_s: f(0.040),
             flow_lag_sd_s: f(0.100),

@@ -284,6 +284,42 @@ fn a_static_head_moves_k2_within_its_range_and_its_covariance_with_it() {
     assert!(o.covariance()[K2][K2] < p[K2][K2]);
 }
 
+/// A pressure lag written mid-run is the one the next step predicts through: from there the
+/// observer steps exactly as one built with it (its decays computed again); a negative or
+/// non-finite lag is refused and changes nothing.
+#[test]
+fn a_pressure_lag_written_mid_run_is_the_next_steps() {
+    let rows = record(6, 10.0, 0.02, &[(5.0, 1.2)]);
+    let slow = ObserverConfig {
+        pressure_lag_s: 0.3,
+        ..ObserverConfig::paper()
+    };
+    let mut built = Observer::<f64>::new(slow, 20.0).unwrap();
+    let mut told = Observer::<f64>::new(ObserverConfig::paper(), 20.0).unwrap();
+    for bad in [-0.01, f64::NAN, f64::INFINITY] {
+        assert!(told.set_pressure_lag_s(bad).is_err(), "{bad}");
+    }
+    assert_eq!(told.config().pressure_lag_s, 0.02);
+    told.set_pressure_lag_s(0.3).unwrap();
+    assert_eq!(told.config(), built.config());
+    let mut moved = 0.0f64;
+    for (i, r) in rows.iter().enumerate() {
+        let m = Measurements {
+            pressure_mca: Some(r.p_meas),
+            flow_lps: (i % 2 == 1).then_some(r.q_meas),
+            speed_rpm: Some(r.w_meas),
+        };
+        let (a, b) = (
+            built.step(0.05, r.torque_pct, &m),
+            told.step(0.05, r.torque_pct, &m),
+        );
+        assert_eq!(a.unwrap(), b.unwrap(), "row {i}");
+        moved = moved.max((built.state()[K2] / rows[0].k2 - 1.0).abs());
+    }
+    // Not vacuous: the 300 ms lag is not the record's 20 ms, and k2 moved with the valve.
+    assert!(moved > 0.1, "k2 moved {moved}");
+}
+
 #[test]
 fn flow_and_speed_without_their_sensors() {
     let steps = [(30.0, 1.3), (75.0, 0.7)];
