@@ -48,6 +48,7 @@ use model_core::narmax::mcu::{NarxF32, NarxF32State, NarxQ15, NarxQ15State, MAX_
 use model_core::narmax::{NarmaxError, NarmaxOutput, Predictor, Scaling};
 use model_core::observer::{
     Measurements, Observer, ObserverConfig, ObserverError, PAPER_PRESSURE_LAG_S,
+    PAPER_PRESSURE_LAG_SD_S,
 };
 use model_core::{BenchError, BenchState, Scheme, Signals, WhiteBox};
 
@@ -95,11 +96,21 @@ pub const OBSERVER_LAG_ALLOWANCE_S: f32 = 0.06;
 /// of `ObserverConfig::paper` ([`PAPER_PRESSURE_LAG_S`]). Behind a transmitter much slower
 /// than the observer's, the observer reads the reading's delay as the valve moving (its k2
 /// over 10 % off during a setpoint step): the loop's probe takes its lesson for a valve step
-/// and undoes it, and the feedforward carries a wrong load (docs/control.md, Limits). The
-/// lag the loop measures is not taken: it changes during a step, and an observer following
-/// it settled some steps later than the PI alone on the random plants (same place).
+/// and undoes it, and the feedforward carries a wrong load (docs/control.md, Limits).
 pub fn observer_pressure_lag_s(register_s: f32) -> f32 {
     (register_s - OBSERVER_LAG_ALLOWANCE_S).max(PAPER_PRESSURE_LAG_S as f32)
+}
+
+/// How far the observer takes its pressure transmitter's lag (`lag_s`, of
+/// [`observer_pressure_lag_s`]) to be off, s (1 σ): the plant's lag the pressure loop measured
+/// beyond it (`measured_s`, [`Controller::measured_lag_s`]), at least the 40 ms of
+/// `ObserverConfig::paper` ([`PAPER_PRESSURE_LAG_SD_S`]). Untold of a slow transmitter, the
+/// observer then weighs the pressure reading less while it moves, so its k2 stays put
+/// through a setpoint step and the probe keeps its lesson. The lag is not taken as such: the
+/// probe's estimate moves during a step, and an observer lag changed mid-step settled some
+/// first steps later than the PI alone on the random plants (docs/control.md, Limits).
+pub fn observer_pressure_lag_sd_s(measured_s: f32, lag_s: f32) -> f32 {
+    (measured_s - lag_s).max(PAPER_PRESSURE_LAG_SD_S as f32)
 }
 
 /// One 1 ms white-box step with the applied torque `u` (finite, 0..=100 %); `false` if it
@@ -742,10 +753,16 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
     }
 
     /// The observer takes the pressure transmitter's lag of [`observer_pressure_lag_s`]
-    /// (register 15's `register_s`) when it changed.
+    /// (register 15's `register_s`) and its uncertainty of [`observer_pressure_lag_sd_s`]
+    /// (the pressure loop's measured lag) when they changed.
     #[inline(never)]
     fn follow_pressure_lag(&mut self, register_s: f32) {
         let lag = observer_pressure_lag_s(register_s);
+        let sd = observer_pressure_lag_sd_s(self.measured_lag_s[0], lag);
+        if sd != self.observer.config().pressure_lag_sd_s {
+            // (A refused value, NaN, leaves the observer's.)
+            let _ = self.observer.set_pressure_lag_sd_s(sd);
+        }
         if lag != self.observer.config().pressure_lag_s {
             // (A refused lag, NaN, leaves the observer's.)
             let _ = self.observer.set_pressure_lag_s(lag);
@@ -1421,19 +1438,25 @@ mod tests {
 
     /// The observer's pressure lag: register 15's default gives `ObserverConfig::paper`'s
     /// (the allowance is the difference), a longer register its lag less the allowance, a
-    /// shorter one no less than the paper's.
+    /// shorter one no less than the paper's; its uncertainty the measured lag beyond it, no
+    /// less than the paper's.
     #[test]
-    fn the_observers_pressure_lag_follows_register_15() {
-        let paper = ObserverConfig::<f32>::paper().pressure_lag_s;
+    fn the_observers_pressure_lag_follows_register_15_and_the_measured_lag() {
+        let paper = ObserverConfig::<f32>::paper();
+        let (lag, sd) = (paper.pressure_lag_s, paper.pressure_lag_sd_s);
         let default = ControlSettings::DEFAULT.pressure_lag_s;
-        assert!((default - OBSERVER_LAG_ALLOWANCE_S - paper).abs() < 1e-6);
-        assert_eq!(observer_pressure_lag_s(default), paper);
-        assert_eq!(observer_pressure_lag_s(0.0), paper);
+        assert!((default - OBSERVER_LAG_ALLOWANCE_S - lag).abs() < 1e-6);
+        assert_eq!(observer_pressure_lag_s(default), lag);
+        assert_eq!(observer_pressure_lag_s(0.0), lag);
         assert_eq!(observer_pressure_lag_s(0.3), 0.3 - OBSERVER_LAG_ALLOWANCE_S);
         assert_eq!(
             observer_pressure_lag_s(10.0),
             10.0 - OBSERVER_LAG_ALLOWANCE_S
         );
+        assert_eq!(observer_pressure_lag_sd_s(0.0, lag), sd);
+        assert_eq!(observer_pressure_lag_sd_s(0.05, lag), sd);
+        assert_eq!(observer_pressure_lag_sd_s(0.17, lag), 0.17 - lag);
+        assert_eq!(observer_pressure_lag_sd_s(0.17, 0.24), sd);
     }
 
     const S: Scaling<f32> = Scaling {

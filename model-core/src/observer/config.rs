@@ -9,6 +9,10 @@ use crate::BenchError;
 /// transmitters).
 pub const PAPER_PRESSURE_LAG_S: f64 = 0.020;
 
+/// How far the pressure transmitter's lag may be from [`PAPER_PRESSURE_LAG_S`] in
+/// [`ObserverConfig::paper`], s (1 σ).
+pub const PAPER_PRESSURE_LAG_SD_S: f64 = 0.040;
+
 /// Tuning of the observer. Noise densities are per second of the random walk (variance grows
 /// by `psd · dt`); standard deviations in the state's unit.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -80,7 +84,7 @@ impl<T: Real> ObserverConfig<T> {
             params: BenchParams::paper(),
             pressure_lag_s: f(PAPER_PRESSURE_LAG_S),
             flow_lag_s: f(0.120),
-            pressure_lag_sd_s: f(0.040),
+            pressure_lag_sd_s: f(PAPER_PRESSURE_LAG_SD_S),
             flow_lag_sd_s: f(0.100),
             drive_lag_s: f(0.025),
             drive_lag_sd_s: f(0.025),

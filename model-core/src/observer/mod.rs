@@ -70,7 +70,7 @@ mod robustness;
 #[cfg(test)]
 pub(crate) mod tests;
 
-pub use config::{ObserverConfig, ObserverError, PAPER_PRESSURE_LAG_S};
+pub use config::{ObserverConfig, ObserverError, PAPER_PRESSURE_LAG_S, PAPER_PRESSURE_LAG_SD_S};
 use estimate::{estimate_finite, unreachable_estimate};
 pub use estimate::{Estimate, Innovation, Use};
 use process::{Hydraulics, StepConsts};
@@ -200,6 +200,18 @@ impl<T: Real> Observer<T> {
         self.cfg.pressure_lag_s = lag_s;
         // Here, not at the next step (a board calls this off the step's tick).
         self.step_consts = StepConsts::new(&self.cfg, self.step_consts.dt);
+        Ok(())
+    }
+
+    /// Takes how far the pressure transmitter's lag may be from the one modelled, s (1 σ,
+    /// finite, ≥ 0; [`ObserverConfig::pressure_lag_sd_s`]): while pressure moves, its
+    /// reading weighs less, so a lag longer than the one modelled moves k2 less. A negative
+    /// or non-finite value is refused; nothing changes then.
+    pub fn set_pressure_lag_sd_s(&mut self, sd_s: T) -> Result<(), ObserverError> {
+        if !(sd_s.is_finite() && sd_s >= T::ZERO) {
+            return Err(ObserverError::Config);
+        }
+        self.cfg.pressure_lag_sd_s = sd_s;
         Ok(())
     }
 

@@ -284,14 +284,15 @@ fn a_static_head_moves_k2_within_its_range_and_its_covariance_with_it() {
     assert!(o.covariance()[K2][K2] < p[K2][K2]);
 }
 
-/// A pressure lag written mid-run is the one the next step predicts through: from there the
-/// observer steps exactly as one built with it (its decays computed again); a negative or
-/// non-finite lag is refused and changes nothing.
+/// A pressure lag and its uncertainty written mid-run are the next step's: from there the
+/// observer steps exactly as one built with them (its decays computed again); a negative or
+/// non-finite value is refused and changes nothing.
 #[test]
-fn a_pressure_lag_written_mid_run_is_the_next_steps() {
+fn a_pressure_lag_and_its_sd_written_mid_run_are_the_next_steps() {
     let rows = record(6, 10.0, 0.02, &[(5.0, 1.2)]);
     let slow = ObserverConfig {
         pressure_lag_s: 0.3,
+        pressure_lag_sd_s: 0.1,
         ..ObserverConfig::paper()
     };
     let mut built = Observer::<f64>::new(slow, 20.0).unwrap();
@@ -300,7 +301,12 @@ fn a_pressure_lag_written_mid_run_is_the_next_steps() {
         assert!(told.set_pressure_lag_s(bad).is_err(), "{bad}");
     }
     assert_eq!(told.config().pressure_lag_s, 0.02);
+    for bad in [-0.01, f64::NAN, f64::INFINITY] {
+        assert!(told.set_pressure_lag_sd_s(bad).is_err(), "{bad}");
+    }
+    assert_eq!(told.config().pressure_lag_sd_s, 0.04);
     told.set_pressure_lag_s(0.3).unwrap();
+    told.set_pressure_lag_sd_s(0.1).unwrap();
     assert_eq!(told.config(), built.config());
     let mut moved = 0.0f64;
     for (i, r) in rows.iter().enumerate() {
