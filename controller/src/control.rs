@@ -47,8 +47,7 @@ use model_core::narmax::adapt::OutputMap;
 use model_core::narmax::mcu::{NarxF32, NarxF32State, NarxQ15, NarxQ15State, MAX_PERIOD_MS};
 use model_core::narmax::{NarmaxError, NarmaxOutput, Predictor, Scaling};
 use model_core::observer::{
-    Measurements, Observer, ObserverConfig, ObserverError, PAPER_PRESSURE_LAG_S,
-    PAPER_PRESSURE_LAG_SD_S,
+    Measurements, Observer, ObserverConfig, ObserverError, PAPER_PRESSURE_LAG_SD_S,
 };
 use model_core::{BenchError, BenchState, Scheme, Signals, WhiteBox};
 
@@ -86,29 +85,18 @@ pub const MODEL_FAULT_SHOWN_MS: u32 = 2000;
 /// holding register 20 in 0.001 mca).
 pub const STATIC_HEAD_MAX_MCA: f32 = 10.0;
 
-/// What holding register 15's default (80 ms) allows beyond the pressure transmitter the
-/// observer models of its own (20 ms, `ObserverConfig::paper`), s: the drive's lag and a
-/// margin, which the observer models apart ([`observer_pressure_lag_s`]).
-pub const OBSERVER_LAG_ALLOWANCE_S: f32 = 0.06;
-
-/// The pressure transmitter's lag the observer models, s: register 15's lag (`register_s`,
-/// [`ControlSettings::pressure_lag_s`]) less [`OBSERVER_LAG_ALLOWANCE_S`], at least the 20 ms
-/// of `ObserverConfig::paper` ([`PAPER_PRESSURE_LAG_S`]). Behind a transmitter much slower
-/// than the observer's, the observer reads the reading's delay as the valve moving (its k2
-/// over 10 % off during a setpoint step): the loop's probe takes its lesson for a valve step
-/// and undoes it, and the feedforward carries a wrong load (docs/control.md, Limits).
-pub fn observer_pressure_lag_s(register_s: f32) -> f32 {
-    (register_s - OBSERVER_LAG_ALLOWANCE_S).max(PAPER_PRESSURE_LAG_S as f32)
-}
-
-/// How far the observer takes its pressure transmitter's lag (`lag_s`, of
-/// [`observer_pressure_lag_s`]) to be off, s (1 σ): the plant's lag the pressure loop measured
-/// beyond it (`measured_s`, [`Controller::measured_lag_s`]), at least the 40 ms of
-/// `ObserverConfig::paper` ([`PAPER_PRESSURE_LAG_SD_S`]). Untold of a slow transmitter, the
-/// observer then weighs the pressure reading less while it moves, so its k2 stays put
-/// through a setpoint step and the probe keeps its lesson. The lag is not taken as such: the
-/// probe's estimate moves during a step, and an observer lag changed mid-step settled some
-/// first steps later than the PI alone on the random plants (docs/control.md, Limits).
+/// How far the observer takes its pressure transmitter's lag (`lag_s`,
+/// `ObserverConfig::pressure_lag_s`, 20 ms) to be off, s (1 σ): the plant's lag the pressure
+/// loop measured beyond it (`measured_s`, [`Controller::measured_lag_s`]), at least the
+/// 40 ms of `ObserverConfig::paper` ([`PAPER_PRESSURE_LAG_SD_S`]). Behind a transmitter much
+/// slower than the observer's, the observer read the reading's delay as the valve moving
+/// (its k2 over 10 % off during a setpoint step): the loop's probe took its lesson for a
+/// valve step and undid it, and the feedforward carried a wrong load. With the uncertainty
+/// it weighs a moving reading less, so its k2 stays put through the step. The observer's
+/// lag itself is not changed: the probe's estimate moves during a step, and a lag changed
+/// mid-step settled some first steps later than the PI alone; nor is it taken from
+/// register 15, which also holds the drive's and other lags the observer models apart
+/// (docs/control.md, Limits).
 pub fn observer_pressure_lag_sd_s(measured_s: f32, lag_s: f32) -> f32 {
     (measured_s - lag_s).max(PAPER_PRESSURE_LAG_SD_S as f32)
 }
@@ -752,20 +740,15 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
         }
     }
 
-    /// The observer takes the pressure transmitter's lag of [`observer_pressure_lag_s`]
-    /// (register 15's `register_s`) and its uncertainty of [`observer_pressure_lag_sd_s`]
-    /// (the pressure loop's measured lag) when they changed.
+    /// The observer takes the uncertainty of its pressure transmitter's lag of
+    /// [`observer_pressure_lag_sd_s`] (the pressure loop's measured lag) when it changed.
     #[inline(never)]
-    fn follow_pressure_lag(&mut self, register_s: f32) {
-        let lag = observer_pressure_lag_s(register_s);
-        let sd = observer_pressure_lag_sd_s(self.measured_lag_s[0], lag);
-        if sd != self.observer.config().pressure_lag_sd_s {
+    fn follow_pressure_lag(&mut self) {
+        let c = self.observer.config();
+        let sd = observer_pressure_lag_sd_s(self.measured_lag_s[0], c.pressure_lag_s);
+        if sd != c.pressure_lag_sd_s {
             // (A refused value, NaN, leaves the observer's.)
             let _ = self.observer.set_pressure_lag_sd_s(sd);
-        }
-        if lag != self.observer.config().pressure_lag_s {
-            // (A refused lag, NaN, leaves the observer's.)
-            let _ = self.observer.set_pressure_lag_s(lag);
         }
     }
 
@@ -1213,9 +1196,9 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
         }
         let on_phase = now % CONTROL_PERIOD_MS == CONTROL_PHASE_MS;
         if on_phase {
-            // On the loops' phase, never an observer step's tick: the observer's constants
-            // computed again there leave the tick's worst case where it was.
-            self.follow_pressure_lag(inp.commands.control.pressure_lag_s);
+            // On the loops' phase, where the measured lag changes: never an observer step's
+            // tick, whose worst case stays where it was.
+            self.follow_pressure_lag();
         }
         // (`control_due`, its phase computed once.)
         let control = self.regulating && on_phase;
@@ -1436,27 +1419,16 @@ mod tests {
         }
     }
 
-    /// The observer's pressure lag: register 15's default gives `ObserverConfig::paper`'s
-    /// (the allowance is the difference), a longer register its lag less the allowance, a
-    /// shorter one no less than the paper's; its uncertainty the measured lag beyond it, no
-    /// less than the paper's.
+    /// The observer's pressure lag uncertainty: the paper's until the measured lag exceeds
+    /// the observer's lag by more, then that excess.
     #[test]
-    fn the_observers_pressure_lag_follows_register_15_and_the_measured_lag() {
+    fn the_observers_lag_uncertainty_is_the_measured_lag_beyond_its_own() {
         let paper = ObserverConfig::<f32>::paper();
         let (lag, sd) = (paper.pressure_lag_s, paper.pressure_lag_sd_s);
-        let default = ControlSettings::DEFAULT.pressure_lag_s;
-        assert!((default - OBSERVER_LAG_ALLOWANCE_S - lag).abs() < 1e-6);
-        assert_eq!(observer_pressure_lag_s(default), lag);
-        assert_eq!(observer_pressure_lag_s(0.0), lag);
-        assert_eq!(observer_pressure_lag_s(0.3), 0.3 - OBSERVER_LAG_ALLOWANCE_S);
-        assert_eq!(
-            observer_pressure_lag_s(10.0),
-            10.0 - OBSERVER_LAG_ALLOWANCE_S
-        );
         assert_eq!(observer_pressure_lag_sd_s(0.0, lag), sd);
         assert_eq!(observer_pressure_lag_sd_s(0.05, lag), sd);
         assert_eq!(observer_pressure_lag_sd_s(0.17, lag), 0.17 - lag);
-        assert_eq!(observer_pressure_lag_sd_s(0.17, 0.24), sd);
+        assert_eq!(observer_pressure_lag_sd_s(1.0, lag), 1.0 - lag);
     }
 
     const S: Scaling<f32> = Scaling {

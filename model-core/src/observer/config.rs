@@ -5,12 +5,8 @@ use crate::params::BenchParams;
 use crate::scalar::Real;
 use crate::BenchError;
 
-/// The pressure transmitter's lag [`ObserverConfig::paper`] models, s (this project's
-/// transmitters).
-pub const PAPER_PRESSURE_LAG_S: f64 = 0.020;
-
-/// How far the pressure transmitter's lag may be from [`PAPER_PRESSURE_LAG_S`] in
-/// [`ObserverConfig::paper`], s (1 σ).
+/// How far the pressure transmitter's lag may be from the one [`ObserverConfig::paper`]
+/// models (20 ms), s (1 σ).
 pub const PAPER_PRESSURE_LAG_SD_S: f64 = 0.040;
 
 /// Tuning of the observer. Noise densities are per second of the random walk (variance grows
@@ -82,7 +78,7 @@ impl<T: Real> ObserverConfig<T> {
         let f = T::from_f64;
         Self {
             params: BenchParams::paper(),
-            pressure_lag_s: f(PAPER_PRESSURE_LAG_S),
+            pressure_lag_s: f(0.020),
             flow_lag_s: f(0.120),
             pressure_lag_sd_s: f(PAPER_PRESSURE_LAG_SD_S),
             flow_lag_sd_s: f(0.100),

@@ -70,7 +70,7 @@ mod robustness;
 #[cfg(test)]
 pub(crate) mod tests;
 
-pub use config::{ObserverConfig, ObserverError, PAPER_PRESSURE_LAG_S, PAPER_PRESSURE_LAG_SD_S};
+pub use config::{ObserverConfig, ObserverError, PAPER_PRESSURE_LAG_SD_S};
 use estimate::{estimate_finite, unreachable_estimate};
 pub use estimate::{Estimate, Innovation, Use};
 use process::{Hydraulics, StepConsts};
@@ -187,20 +187,6 @@ impl<T: Real> Observer<T> {
     /// The configuration.
     pub fn config(&self) -> &ObserverConfig<T> {
         &self.cfg
-    }
-
-    /// Takes the pressure transmitter's first-order lag, s (finite, ≥ 0), as commissioning
-    /// writes it: the lag the pressure reading is predicted through from the next step on
-    /// (its decays are computed again here, ≈ 5 `exp`). The lagged reading's state and the covariance
-    /// stay. A negative or non-finite lag is refused; nothing changes then.
-    pub fn set_pressure_lag_s(&mut self, lag_s: T) -> Result<(), ObserverError> {
-        if !(lag_s.is_finite() && lag_s >= T::ZERO) {
-            return Err(ObserverError::Config);
-        }
-        self.cfg.pressure_lag_s = lag_s;
-        // Here, not at the next step (a board calls this off the step's tick).
-        self.step_consts = StepConsts::new(&self.cfg, self.step_consts.dt);
-        Ok(())
     }
 
     /// Takes how far the pressure transmitter's lag may be from the one modelled, s (1 σ,

@@ -204,7 +204,6 @@ impl<T: Real> StepConsts<T> {
         a
     }
 
-    #[inline(never)]
     pub(super) fn new(cfg: &ObserverConfig<T>, dt: T) -> Self {
         // The fewest substeps of at most MAX_SUBSTEP_S, ≥ 1 (dt ≤ MAX_DT_S keeps it ≤ 400),
         // counted in T: no conversion through f64 (software on the MCU).
