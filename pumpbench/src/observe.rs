@@ -5,7 +5,9 @@
 //! # Semantics
 //!
 //! The observer starts with `Observer::new(ObserverConfig::paper(), u₀)`, at the model's
-//! steady state for the first row's torque. Row 0 is one step of a sample period with torque
+//! steady state for the first row's torque, and keeps that configuration (the controller
+//! also widens the pressure lag's uncertainty to the lag its pressure loop measures, which a
+//! record does not carry: `controller::control::observer_pressure_lag_sd_s`). Row 0 is one step of a sample period with torque
 //! u₀ and row 0's measurements; row k ≥ 1 is `step(t_k − t_{k−1}, u_{k−1}, m_k)`: the torque
 //! of the previous row is what acted over the interval (as in `simulate`), the measurements
 //! are those logged at the end of it. After each step the monitor is updated with that step's
