@@ -741,7 +741,8 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
     }
 
     /// The observer takes the uncertainty of its pressure transmitter's lag of
-    /// [`observer_pressure_lag_sd_s`] (the pressure loop's measured lag) when it changed.
+    /// [`observer_pressure_lag_sd_s`] (the pressure loop's measured lag, just taken) when it
+    /// changed.
     #[inline(never)]
     fn follow_pressure_lag(&mut self) {
         let c = self.observer.config();
@@ -1082,6 +1083,11 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
         let o = r.step(self.whitebox.params(), v.load, s, setpoint, measured);
         r.watch_ring(s);
         self.measured_lag_s[k] = r.lag_s();
+        if k == 0 {
+            // Where the measured lag changes, on a loop's tick: never an observer step's,
+            // whose worst case stays where it was.
+            self.follow_pressure_lag();
+        }
         o.torque_pct
     }
 
@@ -1194,14 +1200,7 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
         if c != self.whitebox.params().static_head_c_mca {
             self.take_static_head(c);
         }
-        let on_phase = now % CONTROL_PERIOD_MS == CONTROL_PHASE_MS;
-        if on_phase {
-            // On the loops' phase, where the measured lag changes: never an observer step's
-            // tick, whose worst case stays where it was.
-            self.follow_pressure_lag();
-        }
-        // (`control_due`, its phase computed once.)
-        let control = self.regulating && on_phase;
+        let control = self.control_due();
         let take_p = now.is_multiple_of(self.pressure.period_ms);
         let take_q = now.is_multiple_of(self.flow.period_ms);
         self.hold = self.protect(inp);

@@ -46,6 +46,16 @@ fn status(b: &mut Board) -> Status {
     Status::from_bits(input(b, 0))
 }
 
+/// Pressure at `sp_mca` in mode 3 from manual 40 % on the bench `bench`, after `ms` ms.
+fn holding_pressure_on(bench: VirtualBenchConfig, sp_mca: f32, ms: u32) -> Board {
+    let mut b = setup_with(Mode::Manual, 40.0, bench);
+    run(&mut b, 3000);
+    write_holding(&mut b, PRESSURE_SP, (sp_mca * 1000.0) as u16);
+    write_holding(&mut b, MODE, 3);
+    run(&mut b, ms);
+    b
+}
+
 /// Pressure at `sp_mca` in mode 3 from manual 40 %, settled.
 fn holding_pressure(sp_mca: f32) -> Board {
     let mut b = setup(Mode::Manual, 40.0);
@@ -255,11 +265,7 @@ fn pressure_and_flow_hold_on_a_bench_further_from_the_model() {
         flow_lag_s: 0.15,
         ..VirtualBenchConfig::default_offsets(99)
     };
-    let mut b = setup_with(Mode::Manual, 40.0, other);
-    run(&mut b, 3000);
-    write_holding(&mut b, PRESSURE_SP, 2500);
-    write_holding(&mut b, MODE, 3);
-    run(&mut b, 8000);
+    let mut b = holding_pressure_on(other, 2.5, 8000);
     let p = b.io.bench.signals().pressure_mca;
     assert!((p - 2.5).abs() < 0.05, "{p}");
     write_holding(&mut b, FLOW_SP, 1500);
@@ -497,11 +503,7 @@ fn the_observers_lag_uncertainty_covers_the_lag_measured() {
         pressure_lag_s: 0.3,
         ..VirtualBenchConfig::default_offsets(7)
     };
-    let mut b = setup_with(Mode::Manual, 40.0, slow);
-    run(&mut b, 3000);
-    write_holding(&mut b, PRESSURE_SP, 2000);
-    write_holding(&mut b, MODE, 3);
-    run(&mut b, 6000);
+    let mut b = holding_pressure_on(slow, 2.0, 6000);
     let k2_held = b.controller.observer().state()[K2];
     let (mut peaks, mut k2_off) = (vec![], 0.0f32);
     for (from, to) in [(2.0f32, 4.0f32), (4.0, 1.0), (1.0, 3.0)] {
