@@ -67,8 +67,11 @@ pub fn parse_args(line: &[u8]) -> Result<Args, &[u8]> {
         head_pml: 1000,
         torque_pml: 1020,
     };
-    // The first word is the program name; words are separated by ASCII spaces.
-    for word in line.split(|&b| b == b' ').filter(|w| !w.is_empty()).skip(1) {
+    // The first word is the program name; words are separated by ASCII spaces. (The name
+    // taken with `next`, not `skip(1)`: `Skip` linked an out-of-line `Iterator::nth`.)
+    let mut words = line.split(|&b| b == b' ').filter(|w| !w.is_empty());
+    let _program = words.next();
+    for word in words {
         let (key, value) = match word.iter().position(|&b| b == b'=') {
             Some(k) => (&word[..k], &word[k + 1..]),
             None => (word, &word[word.len()..]),
