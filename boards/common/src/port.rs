@@ -8,6 +8,7 @@ use controller::modbus::Frame;
 use controller::rtu::Rs485;
 use controller::rtu::RtuFramer;
 use controller::types::Published;
+use core::sync::atomic::{AtomicU16, AtomicUsize};
 use embedded_hal::digital::OutputPin;
 use embedded_hal_nb::serial::{Read, Write};
 use heapless::spsc::{Consumer, Producer};
@@ -16,9 +17,93 @@ use heapless::spsc::{Consumer, Producer};
 /// board's gap timer ([`PortIsr::mark_gap`]); every other entry is a byte.
 pub const GAP: u16 = 0x100;
 
-/// Entries a receive queue holds: more than four longest RTU frames, so a task at the
-/// lowest priority may fall ≈ 500 ms behind a 19 200-baud line before a byte is lost.
+/// A receive queue's size: it holds one entry less (1 023), more than four longest RTU
+/// frames, so a task at the lowest priority may fall ≈ 500 ms behind a 19 200-baud line
+/// before a byte is lost. A power of two ([`RxQueue`]).
 pub const RX_QUEUE: usize = 1024;
+
+/// A receive queue: single producer (the USART's interrupt, [`RxProducer`]), single consumer
+/// (the task, [`RxConsumer`]), lock-free, of `N` slots holding `N − 1` entries (as
+/// `heapless::spsc::Queue<u16, N>`, which it replaces). `N` is a power of two the compiler
+/// sees: an index wraps with a mask, where heapless 0.9's producer and consumer, views of a
+/// queue of any size, divided by the size read at run time (a `UDIV` and a divide-by-zero
+/// panic's path in each USART interrupt). The slots are atomics: no `unsafe`.
+pub struct RxQueue<const N: usize> {
+    /// Where the consumer takes the next entry (0..N).
+    head: AtomicUsize,
+    /// Where the producer puts the next entry (0..N).
+    tail: AtomicUsize,
+    slots: [AtomicU16; N],
+}
+
+impl<const N: usize> RxQueue<N> {
+    /// `N − 1`: an index's wrap (`N` a power of two, at least 2: a build error otherwise).
+    const MASK: usize = {
+        assert!(
+            N >= 2 && N.is_power_of_two(),
+            "a receive queue's size is a power of two"
+        );
+        N - 1
+    };
+
+    /// An empty queue.
+    #[allow(clippy::new_without_default)]
+    pub const fn new() -> Self {
+        let _ = Self::MASK;
+        Self {
+            head: AtomicUsize::new(0),
+            tail: AtomicUsize::new(0),
+            slots: [const { AtomicU16::new(0) }; N],
+        }
+    }
+
+    /// The queue's two ends (once: they borrow it for as long as they live).
+    pub fn split(&mut self) -> (RxProducer<'_, N>, RxConsumer<'_, N>) {
+        (RxProducer { q: self }, RxConsumer { q: self })
+    }
+}
+
+/// The producer end of an [`RxQueue`].
+pub struct RxProducer<'a, const N: usize> {
+    q: &'a RxQueue<N>,
+}
+
+impl<const N: usize> RxProducer<'_, N> {
+    /// Adds `e` at the back; `Err(e)` if the queue is full.
+    #[inline]
+    pub fn enqueue(&mut self, e: u16) -> Result<(), u16> {
+        let q = self.q;
+        let tail = q.tail.load(Ordering::Relaxed);
+        let next = (tail + 1) & RxQueue::<N>::MASK;
+        if next == q.head.load(Ordering::Acquire) {
+            return Err(e);
+        }
+        q.slots[tail & RxQueue::<N>::MASK].store(e, Ordering::Relaxed);
+        q.tail.store(next, Ordering::Release);
+        Ok(())
+    }
+}
+
+/// The consumer end of an [`RxQueue`].
+pub struct RxConsumer<'a, const N: usize> {
+    q: &'a RxQueue<N>,
+}
+
+impl<const N: usize> RxConsumer<'_, N> {
+    /// Takes the entry at the front; `None` if the queue is empty.
+    #[inline]
+    pub fn dequeue(&mut self) -> Option<u16> {
+        let q = self.q;
+        let head = q.head.load(Ordering::Relaxed);
+        if head == q.tail.load(Ordering::Acquire) {
+            return None;
+        }
+        let e = q.slots[head & RxQueue::<N>::MASK].load(Ordering::Relaxed);
+        q.head
+            .store((head + 1) & RxQueue::<N>::MASK, Ordering::Release);
+        Some(e)
+    }
+}
 /// Frames a transmit queue holds (a slave answers one request at a time; a master waits
 /// for its answer): two, one going out and one waiting.
 pub const TX_QUEUE: usize = 3;
@@ -32,18 +117,19 @@ pub struct Activity {
     pub sending: bool,
 }
 
-/// The interrupt side of one port (the board's priority-4 handler calls it).
-pub struct PortIsr<TX, RX, DE> {
+/// The interrupt side of one port (the board's priority-4 handler calls it), with a receive
+/// queue of `N` slots.
+pub struct PortIsr<TX, RX, DE, const N: usize = RX_QUEUE> {
     rs485: Rs485<TX, RX, DE>,
-    rx: Producer<'static, u16>,
+    rx: RxProducer<'static, N>,
     tx: Consumer<'static, Frame>,
 }
 
-impl<TX: Write<u8>, RX: Read<u8>, DE: OutputPin> PortIsr<TX, RX, DE> {
+impl<TX: Write<u8>, RX: Read<u8>, DE: OutputPin, const N: usize> PortIsr<TX, RX, DE, N> {
     /// The port with its queues' ends.
     pub fn new(
         rs485: Rs485<TX, RX, DE>,
-        rx: Producer<'static, u16>,
+        rx: RxProducer<'static, N>,
         tx: Consumer<'static, Frame>,
     ) -> Self {
         Self { rs485, rx, tx }
@@ -125,9 +211,10 @@ impl ByContent {
     }
 }
 
-/// A port's task side: frames out of the receive queue, frames into the transmit queue.
-pub struct PortTask {
-    rx: Consumer<'static, u16>,
+/// A port's task side: frames out of the receive queue (of `N` slots), frames into the
+/// transmit queue.
+pub struct PortTask<const N: usize = RX_QUEUE> {
+    rx: RxConsumer<'static, N>,
     tx: Producer<'static, Frame>,
     framer: RtuFramer,
     by_content: Option<ByContent>,
@@ -136,14 +223,14 @@ pub struct PortTask {
     pub now_us: u32,
 }
 
-impl PortTask {
+impl<const N: usize> PortTask<N> {
     /// The task side of a port whose frames end at a [`GAP`] mark or after `silence_us`
     /// without a byte (timed from when this side takes them); with `by_content`, also by
     /// their content (e.g. [`ByContent::requests`], for a line that marks no silence), and
     /// a start of a frame is kept for its patience. `pend` pends the port's interrupt,
     /// which starts a queued frame.
     pub fn new(
-        rx: Consumer<'static, u16>,
+        rx: RxConsumer<'static, N>,
         tx: Producer<'static, Frame>,
         silence_us: u32,
         by_content: Option<ByContent>,
@@ -218,8 +305,8 @@ impl PortTask {
 /// holding registers handed to `commands` after each. Returns the answers dropped because
 /// the transmit queue was full (0 unless the line is stuck; with the `defmt` feature, a
 /// warning says how many).
-pub fn serve_scada(
-    port: &mut PortTask,
+pub fn serve_scada<const N: usize>(
+    port: &mut PortTask<N>,
     link: &mut ScadaLink,
     now_us: u32,
     mut published: impl FnMut() -> Published,
@@ -249,7 +336,7 @@ pub fn serve_scada(
 }
 
 /// The VFD master's frames over a serial port.
-impl VfdPort for PortTask {
+impl<const N: usize> VfdPort for PortTask<N> {
     fn send(&mut self, frame: &[u8]) {
         // A full queue means the drive's line is stuck: the request runs into its timeout.
         let _ = self.send_frame(frame);
@@ -324,12 +411,12 @@ mod tests {
 
     /// The queues of one port, leaked to `'static` as a board's `init` locals are.
     fn queues<const R: usize, const T: usize>() -> (
-        Producer<'static, u16>,
-        Consumer<'static, u16>,
+        RxProducer<'static, R>,
+        RxConsumer<'static, R>,
         Producer<'static, Frame>,
         Consumer<'static, Frame>,
     ) {
-        let (p, c) = Box::leak(Box::new(Queue::<u16, R>::new())).split();
+        let (p, c) = Box::leak(Box::new(RxQueue::<R>::new())).split();
         let (pt, ct) = Box::leak(Box::new(Queue::<Frame, T>::new())).split();
         (p, c, pt, ct)
     }
@@ -344,13 +431,13 @@ mod tests {
         PENDS.with(Cell::get)
     }
 
-    type Isr = PortIsr<Tx, Rx, NoDe>;
+    type Isr<const R: usize> = PortIsr<Tx, Rx, NoDe, R>;
 
     /// A full-duplex port with queues of `R` entries and `T` frames, both sides.
     fn port<const R: usize, const T: usize>(
         silence_us: u32,
         by_content: Option<ByContent>,
-    ) -> (Isr, PortTask, Rx, Tx) {
+    ) -> (Isr<R>, PortTask<R>, Rx, Tx) {
         let (rx_q, rx_c, tx_p, tx_c) = queues::<R, T>();
         let (rx, tx) = (Rx::default(), Tx::default());
         let isr = PortIsr::new(Rs485::full_duplex(tx.clone(), rx.clone(), NoDe), rx_q, tx_c);
@@ -362,6 +449,37 @@ mod tests {
         let mut f = body.to_vec();
         f.extend_from_slice(&crc16(body).to_le_bytes());
         f
+    }
+
+    /// The receive queue holds `N − 1` entries (as heapless's did), first in first out,
+    /// across many wraps of its indices.
+    #[test]
+    fn the_receive_queue_holds_n_minus_one_in_order_across_wraps() {
+        let (mut p, mut c) = Box::leak(Box::new(RxQueue::<4>::new())).split();
+        assert_eq!(c.dequeue(), None);
+        let (mut next_in, mut next_out) = (0u16, 0u16);
+        for round in 0..50 {
+            let n = round % 4;
+            for _ in 0..n {
+                if p.enqueue(next_in).is_ok() {
+                    next_in += 1;
+                }
+            }
+            assert!(next_in - next_out <= 3);
+            while let Some(e) = c.dequeue() {
+                assert_eq!(e, next_out);
+                next_out += 1;
+            }
+            assert_eq!(next_in, next_out);
+        }
+        for k in 0..3 {
+            assert_eq!(p.enqueue(k), Ok(()));
+        }
+        assert_eq!(p.enqueue(9), Err(9), "full at N - 1");
+        assert_eq!(c.dequeue(), Some(0));
+        assert_eq!(p.enqueue(9), Ok(()));
+        let rest: Vec<u16> = core::iter::from_fn(|| c.dequeue()).collect();
+        assert_eq!(rest, [1, 2, 9]);
     }
 
     #[test]
@@ -599,7 +717,7 @@ mod tests {
     fn scada<const R: usize>(
         requests: usize,
         registers: u8,
-    ) -> (Config, ScadaLink, Isr, PortTask, Tx, Margin) {
+    ) -> (Config, ScadaLink, Isr<R>, PortTask<R>, Tx, Margin) {
         let config = Config::bench();
         let link = ScadaLink::new(&config).unwrap();
         let (mut isr, task, rx, tx) = port::<R, 3>(10_000, Some(ByContent::requests(500_000)));

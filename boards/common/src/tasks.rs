@@ -198,9 +198,9 @@ pub async fn vfd_master(
 /// The SCADA server task: on each wake-up, every complete request on `port` answered
 /// ([`serve_scada`] at `now_us()`, the values from `published`, the holding registers into
 /// `commands`). Returns only when every wake-up's sender is gone (never on a board).
-pub async fn scada_server(
+pub async fn scada_server<const N: usize>(
     wait: &mut ScadaWait,
-    port: &mut PortTask,
+    port: &mut PortTask<N>,
     link: &mut ScadaLink,
     now_us: impl Fn() -> u32,
     mut published: impl Mutex<T = Published>,
@@ -509,8 +509,8 @@ mod tests {
     fn the_scada_server_task_serves_each_wake_up_until_its_senders_are_gone() {
         let config = controller::control::Config::bench();
         let mut link = ScadaLink::new(&config).unwrap();
-        let rx: &'static mut heapless::spsc::Queue<u16, 64> =
-            Box::leak(Box::new(heapless::spsc::Queue::new()));
+        let rx: &'static mut crate::port::RxQueue<64> =
+            Box::leak(Box::new(crate::port::RxQueue::new()));
         let tx: &'static mut heapless::spsc::Queue<controller::modbus::Frame, 3> =
             Box::leak(Box::new(heapless::spsc::Queue::new()));
         let ((mut rx_p, rx_c), (tx_p, mut tx_c)) = (rx.split(), tx.split());

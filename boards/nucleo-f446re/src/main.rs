@@ -124,7 +124,7 @@ static MARGIN: board_common::Margin = board_common::Margin::new();
 mod app {
     use super::*;
     use board_common::dac::{torque_code, DAC12_FULL_SCALE};
-    use board_common::port::{PortIsr, PortTask, RX_QUEUE, TX_QUEUE};
+    use board_common::port::{PortIsr, PortTask, RxQueue, RX_QUEUE, TX_QUEUE};
     use board_common::tasks::{
         log_task, scada_server, vfd_master, vfd_pass, LogWait, ScadaWait, ScadaWake, StepLinks,
         VfdWait,
@@ -222,9 +222,9 @@ mod app {
     }
 
     #[init(local = [
-        rx1: Queue<u16, RX_QUEUE> = Queue::new(),
+        rx1: RxQueue<RX_QUEUE> = RxQueue::new(),
         tx1: Queue<Frame, TX_QUEUE> = Queue::new(),
-        rx6: Queue<u16, RX_QUEUE> = Queue::new(),
+        rx6: RxQueue<RX_QUEUE> = RxQueue::new(),
         tx6: Queue<Frame, TX_QUEUE> = Queue::new(),
     ])]
     fn init(cx: init::Context) -> (Shared, Local) {

@@ -32,7 +32,7 @@ pub const QEMU_REQUEST_PATIENCE_US: u32 = 1_000_000;
 /// [`QEMU_SILENCE_US`] (a request's start after [`QEMU_REQUEST_PATIENCE_US`]); `pend` pends
 /// USART1's interrupt.
 pub fn scada_port(
-    rx: heapless::spsc::Consumer<'static, u16>,
+    rx: board_common::port::RxConsumer<'static, { board_common::port::RX_QUEUE }>,
     tx: heapless::spsc::Producer<'static, controller::modbus::Frame>,
     pend: fn(),
 ) -> board_common::port::PortTask {

@@ -50,7 +50,7 @@ static MARGIN: board_common::Margin = board_common::Margin::new();
 #[rtic::app(device = stm32f4xx_hal::pac, peripherals = true, dispatchers = [EXTI0, EXTI1, EXTI2])]
 mod app {
     use super::*;
-    use board_common::port::{PortIsr, PortTask, RX_QUEUE, TX_QUEUE};
+    use board_common::port::{PortIsr, PortTask, RxQueue, RX_QUEUE, TX_QUEUE};
     use board_common::tasks::{
         log_task, scada_server, vfd_master, vfd_pass, LogMsg, LogWait, ScadaWait, ScadaWake,
         StepLinks, VfdWait,
@@ -106,9 +106,9 @@ mod app {
     }
 
     #[init(local = [
-        rx1: Queue<u16, RX_QUEUE> = Queue::new(),
+        rx1: RxQueue<RX_QUEUE> = RxQueue::new(),
         tx1: Queue<Frame, TX_QUEUE> = Queue::new(),
-        rx2: Queue<u16, RX_QUEUE> = Queue::new(),
+        rx2: RxQueue<RX_QUEUE> = RxQueue::new(),
         tx2: Queue<Frame, TX_QUEUE> = Queue::new(),
     ])]
     fn init(cx: init::Context) -> (Shared, Local) {

@@ -44,7 +44,7 @@ type ReplyLine = heapless::String<128>;
 #[rtic::app(device = stm32f4xx_hal::pac, peripherals = true, dispatchers = [EXTI0, EXTI1, EXTI2])]
 mod app {
     use super::*;
-    use board_common::port::{PortIsr, PortTask, RX_QUEUE, TX_QUEUE};
+    use board_common::port::{PortIsr, PortTask, RxQueue, RX_QUEUE, TX_QUEUE};
     use board_common::tasks::{log_task, LogMsg, LogWait, ScadaWait, ScadaWake, StepLinks};
     use board_common::{record_max, Controller};
     use controller::modbus::Frame;
@@ -83,9 +83,9 @@ mod app {
     }
 
     #[init(local = [
-        rx1: Queue<u16, RX_QUEUE> = Queue::new(),
+        rx1: RxQueue<RX_QUEUE> = RxQueue::new(),
         tx1: Queue<Frame, TX_QUEUE> = Queue::new(),
-        rx2: Queue<u16, RX_QUEUE> = Queue::new(),
+        rx2: RxQueue<RX_QUEUE> = RxQueue::new(),
         tx2: Queue<Frame, TX_QUEUE> = Queue::new(),
     ])]
     fn init(cx: init::Context) -> (Shared, Local) {
