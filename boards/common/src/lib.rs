@@ -10,7 +10,7 @@
 //!
 //! | priority | task | what |
 //! |---|---|---|
-//! | 4 (highest) | USART receive / transmit interrupts (and the Nucleo's RTU gap timers) | bytes into and out of `heapless` queues ([`port::PortIsr`]) |
+//! | 4 (highest) | USART receive / transmit interrupts (and the Nucleo's RTU gap timers) | bytes into lock-free receive queues (`port::RxQueue`), frames out of `heapless` queues ([`port::PortIsr`]) |
 //! | 3 | control, every 1 ms | [`controller::control::Controller::step`], torque output, watchdog; then [`tasks::StepLinks::after_step`] |
 //! | 2 | VFD master | one pass after each control step (a latest-only signal): [`tasks::vfd_master`] |
 //! | 1 | SCADA server, log | Modbus requests ([`tasks::scada_server`]), defmt lines ([`tasks::log_task`]) |

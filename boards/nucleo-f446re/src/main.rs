@@ -5,7 +5,7 @@
 //!
 //! | priority | task | here |
 //! |---|---|---|
-//! | 4 | `usart1`, `usart6` (RXNE, TC) and `tim6`, `tim7` (the RTU gap) | bytes into and out of `heapless` queues |
+//! | 4 | `usart1`, `usart6` (RXNE, TC) and `tim6`, `tim7` (the RTU gap) | bytes into lock-free receive queues (`board_common::port::RxQueue`), frames out of `heapless` queues |
 //! | 3 | `control` (SysTick, 1 kHz) | one [`board_common::Controller`] step, ADC, DAC, watchdog, LED |
 //! | 2 | `vfd` | the VFD master, one pass per step |
 //! | 1 | `scada`, `log` | the SCADA server, defmt lines |

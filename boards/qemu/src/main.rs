@@ -3,7 +3,7 @@
 //!
 //! | priority | task | here |
 //! |---|---|---|
-//! | 4 | `usart1`, `usart2` | SCADA and VFD bytes into `heapless` queues, frames out |
+//! | 4 | `usart1`, `usart2` | SCADA and VFD bytes into lock-free receive queues (`board_common::port::RxQueue`), frames out of `heapless` queues |
 //! | 3 | `control` (SysTick) | one [`board_common::Controller`] step per elapsed ms, the virtual bench stepped |
 //! | 2 | `vfd` | the VFD master, one pass per step |
 //! | 1 | `scada`, `log` | the SCADA server, defmt lines |

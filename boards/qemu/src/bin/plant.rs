@@ -8,7 +8,7 @@
 //!
 //! | priority | task | here |
 //! |---|---|---|
-//! | 4 | `usart1`, `usart2` | SCADA and plant bytes into `heapless` queues, answers out |
+//! | 4 | `usart1`, `usart2` | SCADA and plant bytes into lock-free receive queues (`board_common::port::RxQueue`), answers out of `heapless` queues |
 //! | 2 | `plant` | each complete line served ([`controller::plant::PlantSession::feed`]), its reply queued |
 //! | 1 | `scada`, `log` | the SCADA server on the session's holding registers, defmt lines |
 //! | idle | | `wfi` |
