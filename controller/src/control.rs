@@ -49,7 +49,7 @@ use model_core::narmax::{NarmaxError, NarmaxOutput, Predictor, Scaling};
 use model_core::observer::{
     Measurements, Observer, ObserverConfig, ObserverError, PAPER_PRESSURE_LAG_SD_S,
 };
-use model_core::{BenchError, BenchState, Scheme, Signals, WhiteBox};
+use model_core::{BenchError, BenchState, Real, Scheme, Signals, WhiteBox};
 
 /// Step period, ms: one [`Controller::step`].
 pub const TICK_MS: u32 = 1;
@@ -84,6 +84,119 @@ pub const MODEL_FAULT_SHOWN_MS: u32 = 2000;
 /// The largest static head the models take, either sign, mca ([`Commands::static_head_mca`];
 /// holding register 20 in 0.001 mca).
 pub const STATIC_HEAD_MAX_MCA: f32 = 10.0;
+
+/// Holding register 20's default as the core takes it, mca: the paper's static head, −c
+/// (−0.252). While register 20 holds it the controller learns the system's own
+/// ([`LiftProbe`]); any other value written stands.
+pub const STATIC_HEAD_DEFAULT_MCA: f32 = -model_core::BenchParams::<f32>::PAPER.static_head_c_mca;
+/// Control periods a model-law loop stays within 2 % of its setpoint before its readings
+/// count as a settled operating point (1 s): the readings at its half and at its end within
+/// [`LIFT_STEADY_FRACTION`] of each other (a flow meter damped longer than the pressure loop
+/// settles still moves). Single readings: the transmitters' noise is ≈ 0.1 % of the
+/// pressure, 0.4 % of the flow squared at 10 l/s.
+pub const LIFT_SETTLED_PERIODS: u16 = 200;
+/// How far a settled point's readings (the pressure, the flow squared) may move over half of
+/// [`LIFT_SETTLED_PERIODS`], as a fraction of themselves.
+pub const LIFT_STEADY_FRACTION: f32 = 0.01;
+/// The least flow squared a settled point needs, (l/s)² (1 l/s): under a lift no water
+/// moves, and the pressure then tells nothing of the system curve.
+pub const LIFT_MIN_FLOW_SQ: f32 = 1.0;
+/// The least pressure reading a settled point needs, mca: a transmitter at the floor of its
+/// span reads 0 whatever the system asks below it (a review: c = 0.081 mca learnt from a
+/// reading clamped at 0 at 3 l/s on the paper's bench, whose pressure there is −0.15).
+pub const LIFT_MIN_PRESSURE_MCA: f32 = 0.1;
+/// The smallest spread of the squared flows of two settled points that gives a static head:
+/// this fraction of the larger (at less, noise would dominate the slope).
+pub const LIFT_MIN_SPREAD: f32 = 0.2;
+/// The static heads c a pair may give, mca (−10..=1: a lift of up to 10 mca); outside, the
+/// pair is no system curve of one valve (the valve moved between them).
+pub const LIFT_C_RANGE: (f32, f32) = (-STATIC_HEAD_MAX_MCA, 1.0);
+/// How far a pair's static head must be from the one held to be taken, mca: single readings
+/// put the pairs within ±0.015 mca of the paper's bench's c, and within it nothing changes
+/// (a lift under ≈ 0.35 mca is not learnt; it moves the loops' figures little).
+pub const LIFT_DEAD_BAND_MCA: f32 = 0.1;
+
+/// Learns the system's static head c (eq. (8) at the pressure transmitter: `p = k2² Q² − c`)
+/// from two settled operating points of the model law's loops either side of a setpoint
+/// move, the pressure and the flow both measured: the system curve through them, if the
+/// valve stayed. The observer cannot: at one operating point a lift and a valve give the
+/// same readings. The pump's curves do not enter: the pair is the system's. A control period
+/// not fed (a stop, a trip, a VFD link cut, a transmitter in fault, the PI alone) forgets the
+/// last point: the valve may have moved meanwhile.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct LiftProbe {
+    /// The time of the last period fed, ms.
+    fed_ms: u32,
+    /// The setpoint of the points being settled at, and the periods since its last check.
+    setpoint: f32,
+    settled: u16,
+    /// The pressure (mca) and the flow squared ((l/s)²) at the last check (NaN at the first
+    /// after a setpoint's change: the second check, half a settling later, is the first that
+    /// can hold).
+    mid: (f32, f32),
+    /// The last settled point: its setpoint, pressure and flow squared.
+    anchor: (f32, f32, f32),
+}
+
+impl LiftProbe {
+    const NEW: Self = Self {
+        fed_ms: 0,
+        setpoint: f32::NAN,
+        settled: 0,
+        mid: (f32::NAN, f32::NAN),
+        anchor: (f32::NAN, f32::NAN, f32::NAN),
+    };
+
+    /// One control period at `now_ms` and `setpoint`, with the readings `p` (mca) and `q`
+    /// (l/s), `off` the setpoint less the controlled reading: the static head c (mca) a pair
+    /// of settled points gives, once, as the loop settles at a setpoint other than the last
+    /// settled point's. Settled, the readings are checked every half of
+    /// [`LIFT_SETTLED_PERIODS`] against the last check's and taken as the anchor while they
+    /// hold.
+    #[inline(never)]
+    fn period(&mut self, now_ms: u32, setpoint: f32, off: f32, p: f32, q: f32) -> Option<f32> {
+        const HALF: u16 = LIFT_SETTLED_PERIODS / 2;
+        let gap = now_ms.wrapping_sub(self.fed_ms) != CONTROL_PERIOD_MS;
+        self.fed_ms = now_ms;
+        if gap {
+            // (The anchor's pressure NaN: no pair with it.)
+            self.anchor.1 = f32::NAN;
+        }
+        if gap || setpoint != self.setpoint || off.abs() > 0.02 * setpoint {
+            // (The last check's pressure NaN: the next check does not hold.)
+            (self.setpoint, self.settled, self.mid.0) = (setpoint, 0, f32::NAN);
+            return None;
+        }
+        self.settled += 1;
+        if self.settled < HALF {
+            return None;
+        }
+        // Every half a settling from here on: the readings against the last check's.
+        self.settled = 0;
+        let q2 = q * q;
+        let (p1, q21) = core::mem::replace(&mut self.mid, (p, q2));
+        if !((p - p1).abs() <= LIFT_STEADY_FRACTION * p
+            && (q2 - q21).abs() <= LIFT_STEADY_FRACTION * q2
+            && q2 >= LIFT_MIN_FLOW_SQ
+            && p >= LIFT_MIN_PRESSURE_MCA)
+        {
+            // Still moving (a flow meter damped longer than the loop settles), no flow, or a
+            // pressure at the transmitter's floor.
+            return None;
+        }
+        let (s0, p0, q20) = core::mem::replace(&mut self.anchor, (setpoint, p, q2));
+        let dq2 = q2 - q20;
+        let k = (p - p0) / dq2;
+        let c = k * q2 - p;
+        // (No anchor yet: NaN, and every comparison below false.)
+        (s0 != setpoint
+            && dq2.abs() > LIFT_MIN_SPREAD * Real::max(q2, q20)
+            && k > 0.0
+            && c >= LIFT_C_RANGE.0
+            && c <= LIFT_C_RANGE.1)
+            .then_some(c)
+    }
+}
 
 /// How far the observer takes its pressure transmitter's lag (`lag_s`,
 /// `ObserverConfig::pressure_lag_s`, 20 ms) to be off, s (1 σ): the plant's lag the pressure
@@ -459,11 +572,15 @@ pub struct Commands {
     pub control: ControlSettings,
     /// The system's static head as the models take it, mca (holding register 20,
     /// ±[`STATIC_HEAD_MAX_MCA`]): the pressure the system curve asks at no flow, `−c` of
-    /// eq. (8) (the paper's bench −0.252; a lift is positive). A change moves the white-box
-    /// bench's, the observer's ([`Observer::set_static_head`]) and the loops' model
-    /// (bumpless); a value outside the range (or not finite) is refused, the models keep
-    /// theirs.
+    /// eq. (8) (the paper's bench −0.252; a lift is positive). A write (of any value:
+    /// [`Commands::static_head_writes`]) moves the white-box bench's, the observer's
+    /// ([`Observer::set_static_head`]) and the loops' model (bumpless); a value outside the
+    /// range (or not finite) is refused, the models keep theirs. While it holds its default
+    /// ([`STATIC_HEAD_DEFAULT_MCA`]) the controller learns the system's own from the model
+    /// law's settled points (`LiftProbe`); a write of the default starts that afresh.
     pub static_head_mca: f32,
+    /// Writes of holding register 20 so far (wraps).
+    pub static_head_writes: u8,
 }
 
 /// What the VFD link last established (see [`crate::vfd::VfdMaster`]).
@@ -625,6 +742,11 @@ pub struct Controller<const NP: usize, const HP: usize, const NF: usize, const H
     /// The loop's flags this step: acting on the observer's value, holding for lack of one.
     virtual_measurement: bool,
     control_held: bool,
+    /// Holding register 20 as last taken: its value, mca, and its writes
+    /// ([`Commands::static_head_mca`], [`Commands::static_head_writes`]).
+    static_head_set: (f32, u8),
+    /// Learns the static head while register 20 holds its default.
+    lift: LiftProbe,
 }
 
 /// What the loops take from the observer's last estimate.
@@ -728,6 +850,8 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
             },
             virtual_measurement: false,
             control_held: false,
+            static_head_set: (STATIC_HEAD_DEFAULT_MCA, 0),
+            lift: LiftProbe::NEW,
         };
         let s = c.whitebox.signals(&c.wb);
         c.pressure.reseed(Arithmetic::F32, 0.0, s.pressure_mca);
@@ -751,6 +875,22 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
         {
             if let Some(r) = self.regulator.as_mut() {
                 r.model_changed();
+            }
+        }
+    }
+
+    /// One model-law loop period with both transmitters' readings `p` (mca) and `q` (l/s) at
+    /// `setpoint`, `off` the setpoint less the controlled reading, for the [`LiftProbe`]:
+    /// while register 20 holds its default, a static head it gives more than
+    /// [`LIFT_DEAD_BAND_MCA`] from the models' is taken as a write of it would be. (A pair
+    /// spanning a valve's move is wrong; the next move's corrects it.)
+    #[inline(never)]
+    fn learn_lift(&mut self, setpoint: f32, off: f32, p: f32, q: f32) {
+        if self.static_head_set.0 == STATIC_HEAD_DEFAULT_MCA {
+            if let Some(c) = self.lift.period(self.t_ms, setpoint, off, p, q) {
+                if (c - self.whitebox.params().static_head_c_mca).abs() > LIFT_DEAD_BAND_MCA {
+                    self.take_static_head(c);
+                }
             }
         }
     }
@@ -1098,6 +1238,11 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
         let o = r.step(self.whitebox.params(), v.load, s, setpoint, measured);
         r.watch_ring(s);
         self.measured_lag_s[k] = r.lag_s();
+        // The static head, learnt where register 20 holds its default, from the two
+        // transmitters (a setpoint move's pair of settled points; docs/control.md).
+        if let (Some(p), Some(q), ControlLaw::Model) = (pressure, flow, s.law) {
+            self.learn_lift(setpoint, setpoint - measured, p, q);
+        }
         if k == 0 {
             // Where the measured lag changes, on a loop's tick: never an observer step's,
             // whose worst case stays where it was.
@@ -1211,9 +1356,14 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
                 0
             };
         }
-        let c = -inp.commands.static_head_mca;
-        if c != self.whitebox.params().static_head_c_mca {
-            self.take_static_head(c);
+        let set = (
+            inp.commands.static_head_mca,
+            inp.commands.static_head_writes,
+        );
+        if set != self.static_head_set {
+            // Written: it stands, and the probe starts afresh (for the default).
+            (self.static_head_set, self.lift) = (set, LiftProbe::NEW);
+            self.take_static_head(-set.0);
         }
         let control = self.control_due();
         let take_p = now.is_multiple_of(self.pressure.period_ms);
@@ -1392,6 +1542,88 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
 mod tests {
     use super::*;
 
+    /// Periods of `probe` settled at `setpoint` on the system curve `p = k q² − c` from
+    /// `*t` ms on (one a control period), the flow reading `drift` × the curve's (1:
+    /// settled), each period's drift compounding; the static heads the probe gave.
+    fn settle_at(
+        probe: &mut LiftProbe,
+        t: &mut u32,
+        setpoint: f32,
+        (k, c): (f32, f32),
+        drift: f32,
+    ) -> Vec<f32> {
+        let q = ((setpoint + c) / k).sqrt();
+        let mut f = 1.0;
+        (0..3 * LIFT_SETTLED_PERIODS)
+            .filter_map(|_| {
+                f *= drift;
+                *t += CONTROL_PERIOD_MS;
+                probe.period(*t, setpoint, 0.0, setpoint, q * f)
+            })
+            .collect()
+    }
+
+    /// Two settled points of one system curve give its static head, once per move; a flow
+    /// reading still moving, two flows too close, no flow, a pressure at the transmitter's
+    /// floor, a pair of two valves, or a pair with a period not fed between give none; a
+    /// reading off its setpoint by more than 2 % starts the settling again.
+    #[test]
+    fn the_lift_probe_finds_the_static_head_of_two_settled_points() {
+        let lift = (0.0117, -1.5);
+        let fresh = || (LiftProbe::NEW, 0u32);
+        let (mut probe, mut t) = fresh();
+        assert!(
+            settle_at(&mut probe, &mut t, 2.0, lift, 1.0).is_empty(),
+            "no anchor yet"
+        );
+        let c = settle_at(&mut probe, &mut t, 4.0, lift, 1.0);
+        assert_eq!(c.len(), 1, "{c:?}");
+        assert!((c[0] - lift.1).abs() < 1e-3, "{c:?}");
+        // The paper's own c.
+        let paper = (0.0117, 0.252);
+        let (mut probe, mut t) = fresh();
+        settle_at(&mut probe, &mut t, 2.0, paper, 1.0);
+        let c = settle_at(&mut probe, &mut t, 3.0, paper, 1.0);
+        assert!(c.len() == 1 && (c[0] - 0.252).abs() < 1e-3, "{c:?}");
+        // The flow reading drifting 2 % per 100 periods (a damped meter): nothing.
+        let (mut probe, mut t) = fresh();
+        settle_at(&mut probe, &mut t, 2.0, lift, 1.0);
+        assert!(settle_at(&mut probe, &mut t, 4.0, lift, 1.0002).is_empty());
+        // Two flows too close (4.0 and 4.1 mca: 5 % apart squared).
+        let (mut probe, mut t) = fresh();
+        settle_at(&mut probe, &mut t, 4.0, lift, 1.0);
+        assert!(settle_at(&mut probe, &mut t, 4.1, lift, 1.0).is_empty());
+        // No flow (under 1 l/s): no anchor, so no pair after it either.
+        let (mut probe, mut t) = fresh();
+        settle_at(&mut probe, &mut t, 1.51, lift, 1.0);
+        assert!(settle_at(&mut probe, &mut t, 4.0, lift, 1.0).is_empty());
+        // A reading at the floor (0.05 mca, as at 0 on a curve that asks less): no anchor.
+        let low = (0.0117, 0.2);
+        let (mut probe, mut t) = fresh();
+        settle_at(&mut probe, &mut t, 0.05, low, 1.0);
+        assert!(settle_at(&mut probe, &mut t, 3.0, low, 1.0).is_empty());
+        // The valve closed between the points: more pressure at less flow.
+        let (mut probe, mut t) = fresh();
+        settle_at(&mut probe, &mut t, 2.0, lift, 1.0);
+        assert!(settle_at(&mut probe, &mut t, 3.0, (4.0 * lift.0, lift.1), 1.0).is_empty());
+        // A period not fed between the points (a stop, a cut, a fault): the anchor is gone.
+        let (mut probe, mut t) = fresh();
+        settle_at(&mut probe, &mut t, 2.0, lift, 1.0);
+        t += 2 * CONTROL_PERIOD_MS;
+        assert!(settle_at(&mut probe, &mut t, 4.0, lift, 1.0).is_empty());
+        // Off by 3 % every 150 periods: never settled.
+        let (mut probe, mut t) = fresh();
+        settle_at(&mut probe, &mut t, 2.0, lift, 1.0);
+        let q = ((4.0 + lift.1) / lift.0).sqrt();
+        let got = (0..3 * LIFT_SETTLED_PERIODS)
+            .filter_map(|i| {
+                t += CONTROL_PERIOD_MS;
+                probe.period(t, 4.0, if i % 150 == 0 { 0.12 } else { 0.0 }, 4.0, q)
+            })
+            .count();
+        assert_eq!(got, 0);
+    }
+
     /// Regression (defect 5c of the protection issue): a white-box step that failed left the
     /// diverged state in place and the fault latched for good, "any alarm" with it.
     #[test]
@@ -1431,6 +1663,45 @@ mod tests {
             c.take_static_head(good);
             assert_eq!(held(&c), (good, good));
         }
+    }
+
+    /// Register 20 as SCADA writes it: a learnt static head stands while the register holds
+    /// its default; any write of it (the default too, which the learnt one had left in the
+    /// register) sets the models' static head to it and starts the probe afresh.
+    #[test]
+    fn a_write_of_register_20_sets_the_static_head_even_at_its_default() {
+        use crate::scada::ScadaSlave;
+        use pump_models::{flow, pressure};
+        let p = NarmaxModel::new(&pressure::F32, &pressure::Q15, 50).unwrap();
+        let q = NarmaxModel::new(&flow::F32, &flow::Q15, 100).unwrap();
+        let mut c = Controller::new(&Config::bench(), p, q).unwrap();
+        let mut slave = ScadaSlave::new(1).unwrap();
+        let paper = c.whitebox.params().static_head_c_mca;
+        let step = |c: &mut Controller<_, _, _, _>, slave: &ScadaSlave| {
+            c.step(&Inputs {
+                pressure_code: 0,
+                flow_code: 0,
+                commands: slave.commands(),
+                vfd: VfdStatus::START,
+            });
+            (
+                c.whitebox.params().static_head_c_mca,
+                c.observer().config().params.static_head_c_mca,
+            )
+        };
+        // As if learnt: it stands while nothing is written.
+        c.take_static_head(-1.5);
+        assert_eq!(step(&mut c, &slave), (-1.5, -1.5));
+        let default = (STATIC_HEAD_DEFAULT_MCA * 1000.0).round() as i16;
+        slave.write_words(20, &[default as u16]).unwrap();
+        assert_eq!(
+            step(&mut c, &slave),
+            (paper, paper),
+            "the default written again"
+        );
+        slave.write_words(20, &[1000]).unwrap();
+        assert_eq!(step(&mut c, &slave), (-1.0, -1.0), "a lift written");
+        assert!(c.lift.anchor.0.is_nan(), "the probe afresh");
     }
 
     /// The observer's pressure lag uncertainty: the paper's until the measured lag exceeds

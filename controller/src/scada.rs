@@ -437,6 +437,9 @@ pub struct ScadaSlave {
     /// The system's static head, 0.001 mca as an `i16` in its two's complement (holding
     /// register 20, [`STATIC_HEAD_RANGE`]).
     pub static_head: u16,
+    /// Writes of holding register 20 so far (wraps): each sets the models' static head, the
+    /// default too (the controller's learnt one then starts afresh).
+    pub static_head_writes: u8,
 }
 
 impl ScadaSlave {
@@ -457,6 +460,7 @@ impl ScadaSlave {
             protection: ProtectionConfig::DEFAULT,
             control: ControlRegisters::DEFAULT,
             static_head: STATIC_HEAD_DEFAULT as u16,
+            static_head_writes: 0,
         })
     }
 
@@ -508,6 +512,7 @@ impl ScadaSlave {
             protection: self.protection,
             control: self.control.settings(),
             static_head_mca: f32::from(self.static_head as i16) / 1000.0,
+            static_head_writes: self.static_head_writes,
         }
     }
 
@@ -588,7 +593,10 @@ impl ScadaSlave {
                         next.narmax_adapt_offs = next.narmax_adapt_offs.wrapping_add(1);
                     }
                 }
-                20 if STATIC_HEAD_RANGE.contains(&(v as i16)) => next.static_head = v,
+                20 if STATIC_HEAD_RANGE.contains(&(v as i16)) => {
+                    next.static_head = v;
+                    next.static_head_writes = next.static_head_writes.wrapping_add(1);
+                }
                 _ => return Err(Exception::IllegalDataValue),
             }
         }
