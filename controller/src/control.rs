@@ -953,6 +953,13 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
         self.inertia_factor
     }
 
+    /// The static head the models take now, mca (`−c`: register 20's value as last written,
+    /// or, while it holds its default, the one learnt from the loops' settled points,
+    /// [`LiftProbe`]; the paper's −0.252 until either).
+    pub fn static_head_mca(&self) -> f32 {
+        -self.whitebox.params().static_head_c_mca
+    }
+
     /// The drive's torque lag measured from its torque readings, s
     /// ([`model_core::drive_lag::DriveLagProbe::lag_s`]: 0 until the torque has moved).
     pub fn drive_lag_s(&self) -> f32 {

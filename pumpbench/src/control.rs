@@ -548,6 +548,9 @@ pub struct Trace {
     /// The drive's torque lag the controller measured by the run's end, s
     /// (`Controller::drive_lag_s`; 0 until measured).
     pub drive_lag_s: f32,
+    /// The static head the models took at the run's end, mca (`Controller::static_head_mca`:
+    /// register 20's, or learnt while it holds its default).
+    pub static_head_mca: f32,
     /// The drive's speed reading's lag the controller measured by the run's end, s
     /// (`Controller::speed_lag_s`; 0 until measured).
     pub speed_lag_s: f32,
@@ -703,6 +706,7 @@ pub fn run(
         measured_lag_s: [0.0; 2],
         inertia_factor: 1.0,
         drive_lag_s: 0.0,
+        static_head_mca: controller::control::STATIC_HEAD_DEFAULT_MCA,
         speed_lag_s: 0.0,
         tripped_s: 0.0,
     };
@@ -782,6 +786,7 @@ pub fn run(
         trace.measured_lag_s = c.measured_lag_s();
         trace.inertia_factor = c.inertia_factor();
         trace.drive_lag_s = c.drive_lag_s();
+        trace.static_head_mca = c.static_head_mca();
         trace.speed_lag_s = c.speed_lag_s();
         plant.apply(&reply)?;
         trace.samples.push(Sample {
@@ -1158,7 +1163,7 @@ pub fn report(
             "{}: torque NaN steps {}, outside its limits {}, largest change into a period with \
              the link up {:.1} %/s; measured plant lag: pressure {:.0} ms{}, flow {:.0} ms{}; \
              rotor inertia measured: {:.2} × the paper's; drive lag measured: {:.0} ms; speed \
-             reading lag measured: {:.0} ms; tripped \
+             reading lag measured: {:.0} ms; static head the models take: {:.3} mca; tripped \
              (a protection's 0 %) {:.3} s",
             trace.law.name(),
             trace.nan_steps,
@@ -1171,6 +1176,7 @@ pub fn report(
             trace.inertia_factor,
             trace.drive_lag_s * 1000.0,
             trace.speed_lag_s * 1000.0,
+            trace.static_head_mca,
             trace.tripped_s
         );
     }

@@ -142,6 +142,7 @@ fn trace_of(samples: &[(f64, usize, u16, f64, f64)]) -> Trace {
         measured_lag_s: [0.0; 2],
         inertia_factor: 1.0,
         drive_lag_s: 0.0,
+        static_head_mca: controller::control::STATIC_HEAD_DEFAULT_MCA,
         speed_lag_s: 0.0,
         tripped_s: 0.0,
     }
@@ -479,15 +480,28 @@ fn a_lift_is_learnt_from_a_step_or_told_to_register_20() {
         let (mut plant, u0) = built_in_plant(&o, &scenario).unwrap();
         let trace = run(&mut plant, &scenario, Law::Model, u0, settings, || {}).unwrap();
         let f = figures(&trace, &scenario);
-        [f[1].overshoot_pct.unwrap(), f[2].overshoot_pct.unwrap()]
+        (
+            [f[1].overshoot_pct.unwrap(), f[2].overshoot_pct.unwrap()],
+            trace.static_head_mca,
+        )
     };
-    let learnt = overshoot(&[]);
+    let (learnt, head) = overshoot(&[]);
     let told = overshoot(&[(20, 3000)]);
     let paper = overshoot(&[(20, -251i16 as u16)]);
-    eprintln!("overshoot %, up and down: learnt {learnt:?}, told {told:?}, paper's {paper:?}");
+    eprintln!(
+        "overshoot %, up and down, and static head, mca: learnt {learnt:?} {head}, told \
+         {told:?}, paper's {paper:?}"
+    );
     assert!(learnt[0] > 2.0 && learnt[1] < 1.0, "{learnt:?}");
-    assert!(told[0] < 1.0 && told[1] < 1.0, "{told:?}");
-    assert!(paper[0] > 2.0 && paper[1] > 2.0, "{paper:?}");
+    assert!((head - 3.0).abs() < 0.05, "learnt {head} mca");
+    assert!(
+        told.0[0] < 1.0 && told.0[1] < 1.0 && told.1 == 3.0,
+        "{told:?}"
+    );
+    assert!(
+        paper.0[0] > 2.0 && paper.0[1] > 2.0 && paper.1 == -0.251,
+        "{paper:?}"
+    );
 }
 
 /// A lag of 0 is printed with what it means (no setpoint step showed one), not as a plant
