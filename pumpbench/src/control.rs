@@ -1163,7 +1163,7 @@ pub fn report(
             "{}: torque NaN steps {}, outside its limits {}, largest change into a period with \
              the link up {:.1} %/s; measured plant lag: pressure {:.0} ms{}, flow {:.0} ms{}; \
              rotor inertia measured: {:.2} × the paper's; drive lag measured: {:.0} ms; speed \
-             reading lag measured: {:.0} ms; static head the models take: {:.3} mca; tripped \
+             reading lag measured: {:.0} ms; static head: {:.3} mca; tripped \
              (a protection's 0 %) {:.3} s",
             trace.law.name(),
             trace.nan_steps,
