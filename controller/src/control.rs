@@ -87,7 +87,7 @@ pub const STATIC_HEAD_MAX_MCA: f32 = 10.0;
 
 /// Holding register 20's default as the core takes it, mca: the paper's static head, −c
 /// (−0.252). While register 20 holds it the controller learns the system's own
-/// ([`LiftProbe`]); any other value written stands.
+/// (`LiftProbe`); any other value written stands.
 pub const STATIC_HEAD_DEFAULT_MCA: f32 = -model_core::BenchParams::<f32>::PAPER.static_head_c_mca;
 /// Control periods a model-law loop stays within 2 % of its setpoint before its readings
 /// count as a settled operating point (1 s): the readings at its half and at its end within
@@ -113,7 +113,7 @@ pub const LIFT_MIN_SPREAD: f32 = 0.2;
 /// pair is no system curve of one valve (the valve moved between them).
 pub const LIFT_C_RANGE: (f32, f32) = (-STATIC_HEAD_MAX_MCA, 1.0);
 /// How close two pairs in a row must agree on the static head for it to be taken, mca
-/// ([`LiftProbe::agrees`]).
+/// (`LiftProbe::agrees`).
 pub const LIFT_AGREEMENT_MCA: f32 = 0.1;
 /// How far a pair's static head must be from the one held to be taken, mca: single readings
 /// put the pairs within ±0.015 mca of the paper's bench's c, and within it nothing changes
@@ -985,7 +985,7 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
 
     /// The static head the models take now, mca (`−c`: register 20's value as last written,
     /// or, while it holds its default, the one learnt from the loops' settled points,
-    /// [`LiftProbe`]; the paper's −0.252 until either).
+    /// `LiftProbe`; the paper's −0.252 until either).
     pub fn static_head_mca(&self) -> f32 {
         -self.whitebox.params().static_head_c_mca
     }
