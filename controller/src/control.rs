@@ -124,9 +124,11 @@ pub const LIFT_DEAD_BAND_MCA: f32 = 0.1;
 /// from two settled operating points of the model law's loops either side of a setpoint
 /// move, the pressure and the flow both measured: the system curve through them, if the
 /// valve stayed. The observer cannot: at one operating point a lift and a valve give the
-/// same readings. The pump's curves do not enter: the pair is the system's. A control period
-/// not fed (a stop, a trip, a VFD link cut, a transmitter in fault, the PI alone) forgets the
-/// last point: the valve may have moved meanwhile.
+/// same readings. The pump's curves do not enter: the pair is the system's. A pair is made
+/// only with the point confirmed just before the move: a control period not fed (a stop, a
+/// trip, a VFD link cut, a transmitter in fault, the PI alone), a move from a setpoint not
+/// confirmed, or leaving the band at the point's own setpoint forgets it (the valve may have
+/// moved meanwhile); a pair's head is taken once the next agrees ([`LiftProbe::agrees`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct LiftProbe {
     /// The time of the last period fed, ms.
@@ -910,8 +912,9 @@ impl<const NP: usize, const HP: usize, const NF: usize, const HF: usize>
     /// One model-law loop period with both transmitters' readings `p` (mca) and `q` (l/s) at
     /// `setpoint`, `off` the setpoint less the controlled reading, for the [`LiftProbe`]:
     /// while register 20 holds its default, a static head it gives more than
-    /// [`LIFT_DEAD_BAND_MCA`] from the models' is taken as a write of it would be. (A pair
-    /// spanning a valve's move is wrong; the next move's corrects it.)
+    /// [`LIFT_DEAD_BAND_MCA`] from the models' is taken as a write of it would be, once two
+    /// pairs in a row agree ([`LiftProbe::agrees`]: one pair spanning a valve's move during
+    /// the setpoint's is wrong).
     #[inline(never)]
     fn learn_lift(&mut self, setpoint: f32, off: f32, p: f32, q: f32) {
         if self.static_head_set.0 == STATIC_HEAD_DEFAULT_MCA {
