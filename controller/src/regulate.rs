@@ -604,6 +604,9 @@ pub struct Regulator {
     /// The model changed since (its static head, [`Regulator::model_changed`]): the next
     /// period solves again, as for a new load.
     remodel: bool,
+    /// The last period had no steady state and was not a move's: the integral holds the
+    /// torque (the feedforward 0), and gives back the feedforward of the next period solved.
+    unsolved: bool,
     /// The last torque was held at the range's end (not only the rate's) against the want.
     at_range_limit: bool,
     /// The reference as the transmitter would show it (lagged by its time constant): what the
@@ -697,6 +700,7 @@ impl Regulator {
             last_pct: torque_pct,
             fresh: true,
             remodel: false,
+            unsolved: false,
             load: None,
             at_range_limit: false,
             seen_reference: measured,
@@ -1553,11 +1557,28 @@ impl Regulator {
         } else if let Ok(inv) = steady_torque_near(bench, load, target, &self.near) {
             inv
         } else {
-            // No steady state for the reference (beyond the pump, or a load the observer has
-            // not got yet): the PI alone around the last torque.
+            // No steady state for the reference (beyond the pump, a load the observer has not
+            // got yet, a setpoint under the static head): the PI alone around the last
+            // torque. Between moves the integral takes the feedforward the last period had,
+            // and gives back the one solved at the first period with a steady state again,
+            // unless the torque sits at a limit there (the integral then holds no torque: the
+            // feedforward's return is news, as on a lift's 1 → 3 mca step that starts at 0 %).
+            // (A review: a static head corrected from above a 1 mca setpoint to under it
+            // brought the feedforward back on top of an integral that held the whole torque,
+            // and the pressure to 8.2 mca.) A move's reference passing into or out of a steady
+            // state takes the feedforward's change as a move does (made bumpless there, a
+            // lift's 1 → 3 mca step settled in 1.41 s instead of 0.76).
+            if !self.moving && self.load.is_some() {
+                self.integral_pct += self.near.torque_ref_pct;
+            }
+            self.unsolved = !self.moving;
             self.load = None;
             return (0.0, 0.0, c.fixed_gains(s), None);
         };
+        if self.unsolved && !(self.moving || self.at_range_limit) {
+            self.integral_pct -= inv.torque_ref_pct;
+        }
+        self.unsolved = false;
         let before = self.load.filter(|_| !(same_load || self.fresh));
         let last = self.near;
         self.load = Some(load);
@@ -2816,6 +2837,79 @@ mod tests {
         assert!((a.feedforward_pct - before.feedforward_pct).abs() > 1.0);
         assert!((a.torque_pct - before.torque_pct).abs() < 0.01, "{a:?}");
         assert_eq!(b.feedforward_pct, before.feedforward_pct);
+    }
+
+    /// A model with no steady state at the setpoint (a static head of 5 mca under a 3 mca
+    /// loop) and back: the integral takes the feedforward on the way in and gives it back on
+    /// the way out, so the torque the two ask does not step either way (a review: a static
+    /// head corrected from above the setpoint to under it brought the feedforward back on
+    /// top of an integral that held the whole torque, and the pressure to 8.2 mca at 1).
+    #[test]
+    fn a_model_without_a_steady_state_and_back_moves_no_torque() {
+        let (p, _, load, u0, st, read) = bench_at(3.0);
+        let s = ControlSettings::DEFAULT;
+        let mut reg = Regulator::new(Controlled::Pressure, read, u0, st.speed_rpm);
+        for _ in 0..400 {
+            reg.step(&p, load, &s, read, read);
+        }
+        let asked = |o: RegulatorOutput| o.feedforward_pct + o.integral_pct;
+        let before = reg.last();
+        let lifted = BenchParams {
+            static_head_c_mca: -5.0,
+            ..p
+        };
+        reg.model_changed();
+        let inside = reg.step(&lifted, load, &s, read, read);
+        assert_eq!(inside.feedforward_pct, 0.0, "no steady state: {inside:?}");
+        reg.step(&lifted, load, &s, read, read);
+        reg.model_changed();
+        let back = reg.step(&p, load, &s, read, read);
+        eprintln!("before {before:?}\nwithout {inside:?}\nback {back:?}");
+        assert!(back.feedforward_pct > 10.0, "{back:?}");
+        for o in [inside, back] {
+            assert!(
+                (asked(o) - asked(before)).abs() < 0.05,
+                "{o:?} after {before:?}"
+            );
+            assert!((o.torque_pct - before.torque_pct).abs() < 0.05, "{o:?}");
+        }
+    }
+
+    /// A move that ends without a steady state (a 3 → 1 mca step under a static head of
+    /// 2 mca), and then the model corrected so that there is one (no static head): the
+    /// integral, which learnt the whole torque between moves, takes the feedforward's
+    /// return (without it the torque asked rose by the whole feedforward at once).
+    #[test]
+    fn a_steady_state_back_after_a_move_into_none_moves_no_torque() {
+        let (p, _, load, u0, st, read) = bench_at(3.0);
+        let s = ControlSettings::DEFAULT;
+        let mut reg = Regulator::new(Controlled::Pressure, read, u0, st.speed_rpm);
+        let lifted = BenchParams {
+            static_head_c_mca: -2.0,
+            ..p
+        };
+        reg.model_changed();
+        for _ in 0..400 {
+            reg.step(&lifted, load, &s, read, read);
+        }
+        assert!(reg.last().feedforward_pct > 10.0, "{:?}", reg.last());
+        // The plant follows the reference (the reading is the reference).
+        let mut o = reg.last();
+        for _ in 0..2000 {
+            o = reg.step(&lifted, load, &s, 1.0, o.reference);
+        }
+        assert_eq!(o.feedforward_pct, 0.0, "no steady state at 1 mca: {o:?}");
+        assert!((o.reference - 1.0).abs() < 1e-3, "{o:?}");
+        reg.model_changed();
+        let back = reg.step(&p, load, &s, 1.0, o.reference);
+        eprintln!("without {o:?}\nback {back:?}");
+        assert!(back.feedforward_pct > 10.0, "{back:?}");
+        let asked = |o: RegulatorOutput| o.feedforward_pct + o.integral_pct;
+        assert!(
+            (asked(back) - asked(o)).abs() < 0.05,
+            "{back:?} after {o:?}"
+        );
+        assert!((back.torque_pct - o.torque_pct).abs() < 0.05, "{back:?}");
     }
 
     /// A valve pushing the reading back during a move stops the braking: it would brake

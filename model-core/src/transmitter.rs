@@ -35,8 +35,10 @@ pub const FLOW_LOOP: LoopConfig = LoopConfig::typical(0.0, 30.0);
 
 /// A transmitter's noise, unit variance, one draw from `rng`: the sum of four uniform draws
 /// (24 bits of a SplitMix64 word each), scaled to unit variance. Bounded (±√12 ≈ ±3.46 σ),
-/// cheap on an MCU without `log`/`cos`, and the same sequence on host and target.
-#[inline]
+/// cheap on an MCU without `log`/`cos`, and the same sequence on host and target. (Out of
+/// line: inlined at the virtual bench's two transmitters it cost the QEMU image 144 B more,
+/// for 12 instructions less on the longest tick, `cargo xtask bench`.)
+#[inline(never)]
 pub fn noise(rng: &mut SplitMix64) -> f32 {
     let mut s = 0.0f32;
     for _ in 0..4 {

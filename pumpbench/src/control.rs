@@ -23,7 +23,9 @@
 //! `setpoint`: mca in mode 3 (0..=65.535, holding register 8 in 0.001 mca), l/s in mode 4
 //! (0..=655.35, register 9 in 0.01 l/s), % torque in mode 1 (0..=100, register 0), ignored in
 //! modes 0 and 2 (may be empty there); `valve`: the valve's k2 as a factor of the paper's
-//! (0.2..=5). The last row holds for `--hold-s` seconds.
+//! (0.2..=5); the optional `static_head`: holding register 20 written at the row, the static
+//! head the models take, mca (−10..=10, 0.001 mca; empty: no write), as commissioning would
+//! correct it. The last row holds for `--hold-s` seconds.
 //!
 //! # A settled start
 //! Every run starts at t = −6 s with the plant at the steady state that holds the first row
@@ -83,6 +85,8 @@ const REG_PRESSURE: u16 = 8;
 const REG_FLOW: u16 = 9;
 /// Holding register: the law (0 model-based, 1 PI alone).
 const REG_LAW: u16 = 14;
+/// Holding register: the static head, 0.001 mca, signed (`controller::scada::STATIC_HEAD_RANGE`).
+const REG_STATIC_HEAD: u16 = 20;
 
 /// The plant's side of the lockstep: a frame per period, the controller's reply applied over
 /// the next period. The built-in plant is [`BuiltInPlant`]; an external one (frames on a
@@ -197,6 +201,8 @@ pub struct Row {
     pub valve: f64,
     /// Which sensors work.
     pub sensors: SensorState,
+    /// The static head written to register 20 at this row, mca (−10..=10); `None`: no write.
+    pub static_head_mca: Option<f64>,
 }
 
 impl Row {
@@ -248,6 +254,7 @@ pub fn built_in(name: &str) -> Option<Scenario> {
         setpoint,
         valve,
         sensors,
+        static_head_mca: None,
     };
     let ok = SensorState::OK;
     let no_meter = SensorState {
@@ -337,7 +344,7 @@ fn setpoint_range(mode: u16) -> Option<(f64, &'static str)> {
 /// Errors name the file, the line and the column.
 pub fn read_scenario(path: &Path, hold_s: f64) -> Result<Scenario, InputError> {
     let names = ["t_s", "mode", "setpoint", "valve"];
-    let optional = ["flow_meter", "pressure_meter", "link"];
+    let optional = ["flow_meter", "pressure_meter", "link", "static_head"];
     let mut rows: Vec<Row> = Vec::new();
     let err = |line: u64, c: usize, name: &str, message: String| InputError {
         path: path.to_path_buf(),
@@ -480,12 +487,30 @@ pub fn read_scenario(path: &Path, hold_s: f64) -> Result<Scenario, InputError> {
             pressure_meter: flag(5, "pressure_meter")?,
             link: flag(6, "link")?,
         };
+        let max = f64::from(controller::control::STATIC_HEAD_MAX_MCA);
+        let static_head_mca = match number(7, "static_head")? {
+            Some((v, text)) if !(-max..=max).contains(&v) => {
+                return Err(err(
+                    line,
+                    col(7),
+                    "static_head",
+                    format!(
+                        "static head {} mca is outside register 20's range -{}..{}",
+                        shown(text),
+                        Short(max),
+                        Short(max)
+                    ),
+                ))
+            }
+            v => v.map(|(v, _)| v),
+        };
         rows.push(Row {
             t_s,
             mode,
             setpoint,
             valve,
             sensors,
+            static_head_mca,
         });
         Ok(())
     })?;
@@ -719,6 +744,11 @@ pub fn run(
             if let Some((reg, v)) = r.setpoint_write() {
                 lock.write(reg, &[v])
                     .map_err(|e| refused(&format!("setpoint register {reg} = {v}"), e))?;
+            }
+            if let Some(h) = r.static_head_mca {
+                let v = (h * 1000.0).round() as i16 as u16;
+                lock.write(REG_STATIC_HEAD, &[v])
+                    .map_err(|e| refused(&format!("static head {} mca", Short(h)), e))?;
             }
             if r.mode != mode {
                 lock.write(REG_MODE, &[r.mode])
@@ -1033,6 +1063,9 @@ fn describe_change(p: &Row, r: &Row) -> String {
             "VFD link {}",
             if r.sensors.link { "restored" } else { "cut" }
         ));
+    }
+    if let Some(h) = r.static_head_mca {
+        parts.push(format!("static head {} mca written", Short(h)));
     }
     if parts.is_empty() {
         "no change".into()
