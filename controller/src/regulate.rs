@@ -2808,18 +2808,25 @@ mod tests {
         }
     }
 
-    /// A static head written under a settled loop ([`Regulator::model_changed`]): the next
-    /// period's feedforward is the new model's steady torque, and the integral takes the
-    /// change, so the torque does not step; without the call the last solution stands (the
-    /// load and the target unchanged).
-    #[test]
-    fn a_changed_model_moves_the_feedforward_not_the_torque() {
+    /// The pressure loop settled at 3 mca on the paper's bench (400 periods): the bench, its
+    /// load, the settings, the reading and the loop.
+    fn settled_at_3_mca() -> (BenchParams<f32>, Load<f32>, ControlSettings, f32, Regulator) {
         let (p, _, load, u0, st, read) = bench_at(3.0);
         let s = ControlSettings::DEFAULT;
         let mut reg = Regulator::new(Controlled::Pressure, read, u0, st.speed_rpm);
         for _ in 0..400 {
             reg.step(&p, load, &s, read, read);
         }
+        (p, load, s, read, reg)
+    }
+
+    /// A static head written under a settled loop ([`Regulator::model_changed`]): the next
+    /// period's feedforward is the new model's steady torque, and the integral takes the
+    /// change, so the torque does not step; without the call the last solution stands (the
+    /// load and the target unchanged).
+    #[test]
+    fn a_changed_model_moves_the_feedforward_not_the_torque() {
+        let (p, load, s, read, reg) = settled_at_3_mca();
         let before = reg.last();
         let lifted = BenchParams {
             static_head_c_mca: -1.0,
@@ -2846,13 +2853,7 @@ mod tests {
     /// top of an integral that held the whole torque, and the pressure to 8.2 mca at 1).
     #[test]
     fn a_model_without_a_steady_state_and_back_moves_no_torque() {
-        let (p, _, load, u0, st, read) = bench_at(3.0);
-        let s = ControlSettings::DEFAULT;
-        let mut reg = Regulator::new(Controlled::Pressure, read, u0, st.speed_rpm);
-        for _ in 0..400 {
-            reg.step(&p, load, &s, read, read);
-        }
-        let asked = |o: RegulatorOutput| o.feedforward_pct + o.integral_pct;
+        let (p, load, s, read, mut reg) = settled_at_3_mca();
         let before = reg.last();
         let lifted = BenchParams {
             static_head_c_mca: -5.0,
@@ -2866,13 +2867,21 @@ mod tests {
         let back = reg.step(&p, load, &s, read, read);
         eprintln!("before {before:?}\nwithout {inside:?}\nback {back:?}");
         assert!(back.feedforward_pct > 10.0, "{back:?}");
-        for o in [inside, back] {
-            assert!(
-                (asked(o) - asked(before)).abs() < 0.05,
-                "{o:?} after {before:?}"
-            );
-            assert!((o.torque_pct - before.torque_pct).abs() < 0.05, "{o:?}");
-        }
+        no_torque_step(before, inside);
+        no_torque_step(before, back);
+    }
+
+    /// `after` asks the torque `before` did, feedforward and integral together and in all.
+    fn no_torque_step(before: RegulatorOutput, after: RegulatorOutput) {
+        let asked = |o: RegulatorOutput| o.feedforward_pct + o.integral_pct;
+        assert!(
+            (asked(after) - asked(before)).abs() < 0.05,
+            "{after:?} after {before:?}"
+        );
+        assert!(
+            (after.torque_pct - before.torque_pct).abs() < 0.05,
+            "{after:?} after {before:?}"
+        );
     }
 
     /// A move that ends without a steady state (a 3 → 1 mca step under a static head of
@@ -2904,12 +2913,7 @@ mod tests {
         let back = reg.step(&p, load, &s, 1.0, o.reference);
         eprintln!("without {o:?}\nback {back:?}");
         assert!(back.feedforward_pct > 10.0, "{back:?}");
-        let asked = |o: RegulatorOutput| o.feedforward_pct + o.integral_pct;
-        assert!(
-            (asked(back) - asked(o)).abs() < 0.05,
-            "{back:?} after {o:?}"
-        );
-        assert!((back.torque_pct - o.torque_pct).abs() < 0.05, "{back:?}");
+        no_torque_step(o, back);
     }
 
     /// A valve pushing the reading back during a move stops the braking: it would brake
