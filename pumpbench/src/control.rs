@@ -502,7 +502,8 @@ pub fn read_scenario(path: &Path, hold_s: f64) -> Result<Scenario, InputError> {
                     ),
                 ))
             }
-            v => v.map(|(v, _)| v),
+            // (As register 20 takes it: to 0.001 mca, and so the row says; + 0 makes a −0 0.)
+            v => v.map(|(v, _)| (v * 1000.0).round() / 1000.0 + 0.0),
         };
         rows.push(Row {
             t_s,

@@ -380,13 +380,20 @@ fn bad_scenario_rows_name_their_line_and_column() {
 /// where it is empty.
 #[test]
 fn a_scenario_writes_the_static_head_where_its_column_has_one() {
-    let s =
-        read("t_s,mode,setpoint,valve,static_head\n0,3,1,1,3\n5,3,1,1,\n6,3,1,1,-0.25\n").unwrap();
+    let s = read(
+        "t_s,mode,setpoint,valve,static_head\n0,3,1,1,3\n5,3,1,1,\n6,3,1,1,-0.25\n7,3,1,1,-0.0004\n",
+    )
+    .unwrap();
     let heads: Vec<Option<f64>> = s.rows.iter().map(|r| r.static_head_mca).collect();
-    assert_eq!(heads, [Some(3.0), None, Some(-0.25)]);
+    // (Register 20's resolution: -0.0004 mca is written as 0, and said so.)
+    assert_eq!(heads, [Some(3.0), None, Some(-0.25), Some(0.0)]);
     assert_eq!(
         describe_change(&s.rows[1], &s.rows[2]),
         "static head -0.25 mca written"
+    );
+    assert_eq!(
+        describe_change(&s.rows[2], &s.rows[3]),
+        "static head 0 mca written"
     );
 }
 
