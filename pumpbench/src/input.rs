@@ -275,6 +275,28 @@ pub(crate) fn scan_csv(
         }
         first_of.insert(h, i);
     }
+    // A column named as a known one but for case, `_`, `-` or spaces: a typo that would
+    // otherwise be ignored without a word (`Static_Head` wrote nothing: a review).
+    let key = |s: &str| -> String {
+        s.chars()
+            .filter(|c| !matches!(c, '_' | '-' | ' '))
+            .flat_map(char::to_lowercase)
+            .collect()
+    };
+    let known: Vec<(String, &str)> = names.iter().chain(optional).map(|n| (key(n), *n)).collect();
+    for (i, h) in header.iter().enumerate() {
+        if h.is_empty() || known.iter().any(|(_, n)| *n == h) {
+            continue;
+        }
+        let k = key(h);
+        if let Some((_, n)) = known.iter().find(|(kn, _)| *kn == k) {
+            return Err(err(
+                Some(header_line),
+                Some((i + 1, shown(h))),
+                format!("column '{}' is not '{n}': column names are exact", shown(h)),
+            ));
+        }
+    }
     let mut columns = Vec::with_capacity(names.len() + optional.len());
     for name in names {
         match first_of.get(name) {

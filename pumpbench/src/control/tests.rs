@@ -374,6 +374,13 @@ fn bad_scenario_rows_name_their_line_and_column() {
         ),
         "{e}"
     );
+    let e = read("t_s,mode,setpoint,valve,Static_Head\n0,3,2,1,3\n")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains(":1:5 (Static_Head): column 'Static_Head' is not 'static_head'"),
+        "{e}"
+    );
 }
 
 /// The `static_head` column: register 20 written at its rows (signed, 0.001 mca), no write
