@@ -39,8 +39,9 @@
 //! applies from now on (0..=100 %), which the plant applies to its drive over the next period,
 //! written by Rust's `{}` for an `f32`: the shortest decimal that reads back as the same
 //! `f32` (no exponent, e.g. `37.51953`; in Python, `struct.unpack('f', struct.pack('f',
-//! float(s)))[0]` is the exact value), and `status` SCADA input register 0 (decimal; its bits
-//! in [`crate::scada`]: 0 running, 1 any alarm, 9 in control, …).
+//! float(s)))[0]` is the exact value), and `status` SCADA input register 0's core bits
+//! (decimal; its bits in [`crate::scada`]: 0 running, 1 any alarm, 9 in control, …; not bit 8,
+//! saturated, which only the register map sets).
 //!
 //! The reasons of `E <reason>`: `long` (more than [`MAX_LINE`] bytes before the `\n`),
 //! `ascii` (a byte outside printable ASCII), `empty` (a blank line), `command` (an unknown
