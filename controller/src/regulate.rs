@@ -1572,8 +1572,12 @@ impl Regulator {
             // between moves (not during one nor its wait for the reading), the integral takes
             // the feedforward the last period had; when the model's change brings one back
             // after a period without, between moves, the integral gives back the one solved,
-            // unless the torque sits at a limit there (the integral then holds no torque: the
-            // feedforward's return is news, as on a lift's 1 → 3 mca step that starts at 0 %).
+            // unless the torque sits at its low limit there (the integral then holds no
+            // torque: the feedforward's return is news, as on a lift's 1 → 3 mca step that
+            // starts at 0 %). At the high limit it gives it back (kept there, with the limit
+            // at 30 % and register 20 written over a 3 mca setpoint and back, the integral
+            // held the feedforward twice and a later 1.5 mca step settled in 4.6 s, 0.89 now).
+            // Both transfers within the torque limits, as the feedforward.
             // A load's change either way, as before: the observer still on the old load when
             // the valve came back from ×0.2 gave a feedforward of 100 %, and given back it
             // took the ×1 step back within 2 % in 0.809 s, 0.743 without.
@@ -1586,14 +1590,15 @@ impl Regulator {
             // torque of 0.5 mca, not the feedforward's, and the step settled later: a review).
             let between = !(self.moving || self.arriving > 0);
             if between && remodel && self.load.is_some() {
-                self.integral_pct += self.near.torque_ref_pct;
+                self.integral_pct += s.within_limits(self.near.torque_ref_pct);
             }
             self.unsolved = between;
             self.load = None;
             return (0.0, 0.0, c.fixed_gains(s), None);
         };
-        if self.unsolved && remodel && !(self.moving || self.arriving > 0 || self.at_range_limit) {
-            self.integral_pct -= inv.torque_ref_pct;
+        let at_low_limit = self.at_range_limit && self.last_pct <= s.torque_min_pct;
+        if self.unsolved && remodel && !(self.moving || self.arriving > 0 || at_low_limit) {
+            self.integral_pct -= s.within_limits(inv.torque_ref_pct);
         }
         self.unsolved = false;
         let before = self.load.filter(|_| !(same_load || self.fresh));
@@ -1629,15 +1634,21 @@ impl Regulator {
                     .map(|o| o.torque_ref_pct)
             };
             if let Some(old) = old {
-                let change = inv.torque_ref_pct - old;
+                let change = s.within_limits(inv.torque_ref_pct) - s.within_limits(old);
                 self.integral_pct -= change;
                 if let Some(x) = self.excursion.as_mut() {
                     x.taken -= change;
                 }
             }
         }
+        // The feedforward within the torque limits: the model's steady torque beyond the
+        // high limit (register 11 under it) would leave its excess in the integral, bumpless
+        // at the limit, and a setpoint lowered into reach later would find the integral that
+        // much short (the limit at 30 %, held at 1.56 mca for a 3 mca setpoint, then 1.5 mca:
+        // the pressure fell to 1.14 mca, 27.7 % of the step under).
+        let ff = s.within_limits(inv.torque_ref_pct);
         let Some(l) = l else {
-            return (inv.torque_ref_pct, 0.0, c.fixed_gains(s), None);
+            return (ff, 0.0, c.fixed_gains(s), None);
         };
         // τ = J / (a ∂TL/∂ω): the model's, times the inertia measured over the paper's.
         let tau = l.time_constant_s * self.inertia;
@@ -1672,7 +1683,7 @@ impl Regulator {
         let floor = 2.0 * Real::max(self.probe.lag_s, told);
         let lambda = self.calmed(if asked > floor { asked } else { floor }, default);
         (
-            inv.torque_ref_pct,
+            ff,
             plant_tau * rate / gain,
             PiGains {
                 kc: tau / (gain * lambda),

@@ -124,6 +124,21 @@ impl ControlSettings {
         pressure_closed_loop_s: crate::regulate::PRESSURE_CLOSED_LOOP_S,
         flow_closed_loop_s: crate::regulate::FLOW_CLOSED_LOOP_S,
     };
+
+    /// `torque_pct` (%) within [`Self::torque_min_pct`]..=[`Self::torque_max_pct`] (by
+    /// comparisons: no panic path if the limits cross, the low one then wins; NaN stays NaN).
+    pub fn within_limits(&self, torque_pct: f32) -> f32 {
+        let t = if torque_pct > self.torque_max_pct {
+            self.torque_max_pct
+        } else {
+            torque_pct
+        };
+        if t < self.torque_min_pct {
+            self.torque_min_pct
+        } else {
+            t
+        }
+    }
 }
 
 impl Default for ControlSettings {
@@ -394,5 +409,25 @@ mod tests {
             size_of::<Published>(),
             22 * size_of::<f32>() + 6 * size_of::<u16>()
         );
+    }
+
+    /// A torque is taken within the loops' limits; crossed limits give the low one, and NaN
+    /// stays NaN (the regulator's own checks see it).
+    #[test]
+    fn a_torque_is_taken_within_the_limits() {
+        let s = ControlSettings {
+            torque_min_pct: 10.0,
+            torque_max_pct: 30.0,
+            ..ControlSettings::DEFAULT
+        };
+        assert_eq!(s.within_limits(65.0), 30.0);
+        assert_eq!(s.within_limits(5.0), 10.0);
+        assert_eq!(s.within_limits(20.0), 20.0);
+        assert!(s.within_limits(f32::NAN).is_nan());
+        let crossed = ControlSettings {
+            torque_min_pct: 40.0,
+            ..s
+        };
+        assert_eq!(crossed.within_limits(35.0), 40.0);
     }
 }
