@@ -1572,12 +1572,9 @@ impl Regulator {
             // between moves (not during one nor its wait for the reading), the integral takes
             // the feedforward the last period had; when the model's change brings one back
             // after a period without, between moves, the integral gives back the one solved,
-            // unless the torque sits at its low limit there (the integral then holds no
-            // torque: the feedforward's return is news, as on a lift's 1 → 3 mca step that
-            // starts at 0 %). At the high limit it gives it back (kept there, with the limit
-            // at 30 % and register 20 written over a 3 mca setpoint and back, the integral
-            // held the feedforward twice and a later 1.5 mca step settled in 4.6 s, 0.89 now).
-            // Both transfers within the torque limits, as the feedforward.
+            // unless the torque sits at a limit there (the integral then holds no torque: the
+            // feedforward's return is news, as on a lift's 1 → 3 mca step that starts at 0 %).
+            // Both transfers under the high limit, as the feedforward.
             // A load's change either way, as before: the observer still on the old load when
             // the valve came back from ×0.2 gave a feedforward of 100 %, and given back it
             // took the ×1 step back within 2 % in 0.809 s, 0.743 without.
@@ -1590,15 +1587,14 @@ impl Regulator {
             // torque of 0.5 mca, not the feedforward's, and the step settled later: a review).
             let between = !(self.moving || self.arriving > 0);
             if between && remodel && self.load.is_some() {
-                self.integral_pct += s.within_limits(self.near.torque_ref_pct);
+                self.integral_pct += s.under_high_limit(self.near.torque_ref_pct);
             }
             self.unsolved = between;
             self.load = None;
             return (0.0, 0.0, c.fixed_gains(s), None);
         };
-        let at_low_limit = self.at_range_limit && self.last_pct <= s.torque_min_pct;
-        if self.unsolved && remodel && !(self.moving || self.arriving > 0 || at_low_limit) {
-            self.integral_pct -= s.within_limits(inv.torque_ref_pct);
+        if self.unsolved && remodel && !(self.moving || self.arriving > 0 || self.at_range_limit) {
+            self.integral_pct -= s.under_high_limit(inv.torque_ref_pct);
         }
         self.unsolved = false;
         let before = self.load.filter(|_| !(same_load || self.fresh));
@@ -1634,19 +1630,22 @@ impl Regulator {
                     .map(|o| o.torque_ref_pct)
             };
             if let Some(old) = old {
-                let change = s.within_limits(inv.torque_ref_pct) - s.within_limits(old);
+                let change = s.under_high_limit(inv.torque_ref_pct) - s.under_high_limit(old);
                 self.integral_pct -= change;
                 if let Some(x) = self.excursion.as_mut() {
                     x.taken -= change;
                 }
             }
         }
-        // The feedforward within the torque limits: the model's steady torque beyond the
-        // high limit (register 11 under it) would leave its excess in the integral, bumpless
-        // at the limit, and a setpoint lowered into reach later would find the integral that
-        // much short (the limit at 30 %, held at 1.56 mca for a 3 mca setpoint, then 1.5 mca:
-        // the pressure fell to 1.14 mca, 27.7 % of the step under).
-        let ff = s.within_limits(inv.torque_ref_pct);
+        // The feedforward under the high limit: the model's steady torque beyond it (register
+        // 11 under it) would leave its excess in the integral, bumpless at the limit, and a
+        // setpoint lowered into reach later would find the integral that much short (the
+        // limit at 30 %, held at 1.56 mca for a 3 mca setpoint, then 1.5 mca: the pressure
+        // fell to 1.14 mca, 27.7 % of the step under). Not over the low limit too: a loop
+        // started under it (the integral bumpless from the torque applied) kept the gap in
+        // its integral, held at the limit, and stayed there for good (a hostile review:
+        // register 10 at 40 %, 0.3 then 2.5 mca, 15 % under after 60 s).
+        let ff = s.under_high_limit(inv.torque_ref_pct);
         let Some(l) = l else {
             return (ff, 0.0, c.fixed_gains(s), None);
         };

@@ -125,18 +125,13 @@ impl ControlSettings {
         flow_closed_loop_s: crate::regulate::FLOW_CLOSED_LOOP_S,
     };
 
-    /// `torque_pct` (%) within [`Self::torque_min_pct`]..=[`Self::torque_max_pct`] (by
-    /// comparisons: no panic path if the limits cross, the low one then wins; NaN stays NaN).
-    pub fn within_limits(&self, torque_pct: f32) -> f32 {
-        let t = if torque_pct > self.torque_max_pct {
+    /// `torque_pct` (%) no higher than [`Self::torque_max_pct`] (by a comparison: NaN stays
+    /// NaN).
+    pub fn under_high_limit(&self, torque_pct: f32) -> f32 {
+        if torque_pct > self.torque_max_pct {
             self.torque_max_pct
         } else {
             torque_pct
-        };
-        if t < self.torque_min_pct {
-            self.torque_min_pct
-        } else {
-            t
         }
     }
 }
@@ -411,23 +406,18 @@ mod tests {
         );
     }
 
-    /// A torque is taken within the loops' limits; crossed limits give the low one, and NaN
-    /// stays NaN (the regulator's own checks see it).
+    /// A torque is taken under the loops' high limit; NaN stays NaN (the regulator's own
+    /// checks see it).
     #[test]
-    fn a_torque_is_taken_within_the_limits() {
+    fn a_torque_is_taken_under_the_high_limit() {
         let s = ControlSettings {
             torque_min_pct: 10.0,
             torque_max_pct: 30.0,
             ..ControlSettings::DEFAULT
         };
-        assert_eq!(s.within_limits(65.0), 30.0);
-        assert_eq!(s.within_limits(5.0), 10.0);
-        assert_eq!(s.within_limits(20.0), 20.0);
-        assert!(s.within_limits(f32::NAN).is_nan());
-        let crossed = ControlSettings {
-            torque_min_pct: 40.0,
-            ..s
-        };
-        assert_eq!(crossed.within_limits(35.0), 40.0);
+        assert_eq!(s.under_high_limit(65.0), 30.0);
+        assert_eq!(s.under_high_limit(5.0), 5.0);
+        assert_eq!(s.under_high_limit(20.0), 20.0);
+        assert!(s.under_high_limit(f32::NAN).is_nan());
     }
 }
