@@ -1587,14 +1587,23 @@ impl Regulator {
             // torque of 0.5 mca, not the feedforward's, and the step settled later: a review).
             let between = !(self.moving || self.arriving > 0);
             if between && remodel && self.load.is_some() {
-                self.integral_pct += s.under_high_limit(self.near.torque_ref_pct);
+                self.integral_pct += at_most(self.near.torque_ref_pct, s.torque_max_pct);
             }
             self.unsolved = between;
             self.load = None;
             return (0.0, 0.0, c.fixed_gains(s), None);
         };
+        // The feedforward under the high limit: the model's steady torque beyond it (register
+        // 11 under it) would leave its excess in the integral, bumpless at the limit, and a
+        // setpoint lowered into reach later would find the integral that much short (the
+        // limit at 30 %, held at 1.56 mca for a 3 mca setpoint, then 1.5 mca: the pressure
+        // fell to 1.14 mca, 27.7 % of the step under). Not over the low limit too: a loop
+        // started under it (the integral bumpless from the torque applied) kept the gap in
+        // its integral, held at the limit, and stayed there for good (a hostile review:
+        // register 10 at 40 %, 0.3 then 2.5 mca, 15 % under after 60 s).
+        let ff = at_most(inv.torque_ref_pct, s.torque_max_pct);
         if self.unsolved && remodel && !(self.moving || self.arriving > 0 || self.at_range_limit) {
-            self.integral_pct -= s.under_high_limit(inv.torque_ref_pct);
+            self.integral_pct -= ff;
         }
         self.unsolved = false;
         let before = self.load.filter(|_| !(same_load || self.fresh));
@@ -1630,22 +1639,13 @@ impl Regulator {
                     .map(|o| o.torque_ref_pct)
             };
             if let Some(old) = old {
-                let change = s.under_high_limit(inv.torque_ref_pct) - s.under_high_limit(old);
+                let change = ff - at_most(old, s.torque_max_pct);
                 self.integral_pct -= change;
                 if let Some(x) = self.excursion.as_mut() {
                     x.taken -= change;
                 }
             }
         }
-        // The feedforward under the high limit: the model's steady torque beyond it (register
-        // 11 under it) would leave its excess in the integral, bumpless at the limit, and a
-        // setpoint lowered into reach later would find the integral that much short (the
-        // limit at 30 %, held at 1.56 mca for a 3 mca setpoint, then 1.5 mca: the pressure
-        // fell to 1.14 mca, 27.7 % of the step under). Not over the low limit too: a loop
-        // started under it (the integral bumpless from the torque applied) kept the gap in
-        // its integral, held at the limit, and stayed there for good (a hostile review:
-        // register 10 at 40 %, 0.3 then 2.5 mca, 15 % under after 60 s).
-        let ff = s.under_high_limit(inv.torque_ref_pct);
         let Some(l) = l else {
             return (ff, 0.0, c.fixed_gains(s), None);
         };
@@ -1697,6 +1697,17 @@ impl Regulator {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The feedforward's bound (`at_most` under the torque high limit): above it the limit,
+    /// under it the value, NaN the limit.
+    #[test]
+    fn a_torque_is_taken_under_the_high_limit() {
+        let max = 30.0;
+        assert_eq!(at_most(65.0, max), 30.0);
+        assert_eq!(at_most(5.0, max), 5.0);
+        assert_eq!(at_most(20.0, max), 20.0);
+        assert_eq!(at_most(f32::NAN, max), max);
+    }
     use crate::analog::lag_1ms;
     use model_core::inverse::{linearise, steady_torque};
     use model_core::{Scheme, WhiteBox};

@@ -124,16 +124,6 @@ impl ControlSettings {
         pressure_closed_loop_s: crate::regulate::PRESSURE_CLOSED_LOOP_S,
         flow_closed_loop_s: crate::regulate::FLOW_CLOSED_LOOP_S,
     };
-
-    /// `torque_pct` (%) no higher than [`Self::torque_max_pct`] (by a comparison: NaN stays
-    /// NaN).
-    pub fn under_high_limit(&self, torque_pct: f32) -> f32 {
-        if torque_pct > self.torque_max_pct {
-            self.torque_max_pct
-        } else {
-            torque_pct
-        }
-    }
 }
 
 impl Default for ControlSettings {
@@ -404,20 +394,5 @@ mod tests {
             size_of::<Published>(),
             22 * size_of::<f32>() + 6 * size_of::<u16>()
         );
-    }
-
-    /// A torque is taken under the loops' high limit; NaN stays NaN (the regulator's own
-    /// checks see it).
-    #[test]
-    fn a_torque_is_taken_under_the_high_limit() {
-        let s = ControlSettings {
-            torque_min_pct: 10.0,
-            torque_max_pct: 30.0,
-            ..ControlSettings::DEFAULT
-        };
-        assert_eq!(s.under_high_limit(65.0), 30.0);
-        assert_eq!(s.under_high_limit(5.0), 5.0);
-        assert_eq!(s.under_high_limit(20.0), 20.0);
-        assert!(s.under_high_limit(f32::NAN).is_nan());
     }
 }
