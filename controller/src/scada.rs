@@ -92,8 +92,17 @@ pub const STATIC_HEAD_RANGE: core::ops::RangeInclusive<i16> = {
     let max = (crate::control::STATIC_HEAD_MAX_MCA * 1000.0) as i16;
     -max..=max
 };
-/// Holding register 20's default: the paper's bench, `−c` (−0.252 mca) in 0.001 mca.
-pub const STATIC_HEAD_DEFAULT: i16 = (-model_core::params::PAPER_C_MCA * 1000.0 - 0.5) as i16;
+/// Holding register 20's default: the paper's bench, `−c` (−0.252 mca) in 0.001 mca, the
+/// core's [`crate::control::STATIC_HEAD_DEFAULT_MCA`] rounded to the register's unit (the
+/// controller learns the lift while the register reads it back as that value).
+pub const STATIC_HEAD_DEFAULT: i16 = {
+    let milli = crate::control::STATIC_HEAD_DEFAULT_MCA * 1000.0;
+    (if milli < 0.0 {
+        milli - 0.5
+    } else {
+        milli + 0.5
+    }) as i16
+};
 /// Largest setpoint filter and transmitter time constant (holding registers 13, 15, 16), ms.
 pub const SETPOINT_FILTER_MAX_MS: u16 = 10_000;
 /// Holding registers 17 and 18: the closed-loop time constants accepted, ms. Below 60 ms
@@ -1008,13 +1017,18 @@ mod tests {
     }
 
     /// Holding register 20: the static head, signed 0.001 mca, the paper's −0.252 mca by
-    /// default (the core's c of 0.252 to the bit), −10..=10 mca and nothing else.
+    /// default (read back as the core's default to the bit: the value at which the
+    /// controller learns the lift, itself the paper's c), −10..=10 mca and nothing else.
     #[test]
     fn register_20_is_the_static_head_signed() {
         let mut s = ScadaSlave::new(1).unwrap();
         assert_eq!(s.holding()[20], (-252i16) as u16);
-        let c = -s.commands().static_head_mca;
-        assert_eq!(c, model_core::BenchParams::<f32>::PAPER.static_head_c_mca);
+        let mca = s.commands().static_head_mca;
+        assert_eq!(mca, crate::control::STATIC_HEAD_DEFAULT_MCA);
+        assert_eq!(
+            -mca,
+            model_core::BenchParams::<f32>::PAPER.static_head_c_mca
+        );
         for (v, mca) in [
             (1500i16, 1.5f32),
             (-10_000, -10.0),
