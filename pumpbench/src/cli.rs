@@ -155,19 +155,23 @@ pub struct ControlArgs {
     pub scenario: Option<String>,
     /// Instead of the built-in plant, serve the plant protocol (`controller::plant`, version 1)
     /// on standard input and output: an external plant closes the loop in lockstep, its
-    /// scenario in its own `W` lines (docs/control.md); the controller is the boards'. The
-    /// built-in plant's options (its curves, lags, inertias, seed) and the scenario's are
-    /// refused with it: the external plant is the plant.
+    /// scenario in its own `W` lines (docs/control.md); the controller is the boards'. With
+    /// it, `--controller model` (the default) or `pi` chooses the law (holding register 14,
+    /// written before the first frame; `both` needs a plant run twice: run the session once
+    /// with each) and `--set` writes holding registers before the first frame. The built-in
+    /// plant's options (its curves, lags, inertias, seed), the scenario's and the figures'
+    /// are refused with it: the external plant is the plant, and it measures.
     #[arg(long, conflicts_with_all = [
-        "scenario", "controller", "targets", "output", "plot", "set", "seed", "hold_s",
+        "scenario", "targets", "output", "plot", "seed", "hold_s",
         "flow_lag_ms", "curve_error", "curve_shape", "water_inertia", "drive_lag_ms", "rotor_inertia",
         "pressure_lag_ms", "speed_lag_ms", "static_head", "flow_update_ms",
         "drive_slew_pct_s", "transmitter_delay_ms",
     ])]
     pub plant_stdio: bool,
-    /// The law(s) to run.
-    #[arg(long, value_enum, default_value = "both")]
-    pub controller: ControllerChoice,
+    /// The law(s) to run. Default: `both` on the built-in plant, `model` with
+    /// `--plant-stdio`.
+    #[arg(long, value_enum)]
+    pub controller: Option<ControllerChoice>,
     /// Print the targets beside each figure, with PASS or MISS (a miss is not an
     /// error: the exit code stays 0).
     #[arg(long)]

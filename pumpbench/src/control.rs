@@ -1475,10 +1475,40 @@ pub fn command(a: ControlArgs) -> Result<(), Failure> {
     let Some(name) = a.scenario.as_deref().filter(|_| !a.plant_stdio) else {
         // The external plant: the boards' controller and session, one code path with the
         // QEMU board's plant mode (board_common::serve_plant).
+        let law = match a.controller {
+            None | Some(ControllerChoice::Model) => Law::Model,
+            Some(ControllerChoice::Pi) => Law::Pi,
+            Some(ControllerChoice::Both) => {
+                return Err(Failure::usage(
+                    "--plant-stdio --controller both: an external plant is one session, one \
+                     law; run it once with --controller model and once with --controller pi \
+                     (or write holding register 14 in a W line)"
+                        .into(),
+                ))
+            }
+        };
+        let mut writes = vec![(REG_LAW, law.register())];
+        for w in &a.set {
+            writes.push(parse_setting(w)?);
+        }
+        // Each write tried on a session of its own first: a refused `--set` is a usage error,
+        // as with the built-in plant, before anything is served.
+        let (_, mut tried) = board_common::plant_session().map_err(|e| Failure {
+            code: 1,
+            message: format!("plant session: {e}"),
+        })?;
+        for &(reg, v) in &writes {
+            tried.lockstep_mut().write(reg, &[v]).map_err(|e| {
+                Failure::usage(format!(
+                    "--set {reg}={v}: the controller refused it ({e:?})"
+                ))
+            })?;
+        }
         let mut steps = 0u64;
         let served = board_common::serve_plant(
             std::io::stdin().lock(),
             &mut std::io::stdout().lock(),
+            &writes,
             |_, _| steps += 1,
         );
         eprintln!(
@@ -1520,7 +1550,7 @@ pub fn command(a: ControlArgs) -> Result<(), Failure> {
         outputs.push(("--plot", png));
     }
     output::check_outputs(&inputs, &outputs)?;
-    let laws: &[Law] = match a.controller {
+    let laws: &[Law] = match a.controller.unwrap_or(ControllerChoice::Both) {
         ControllerChoice::Model => &[Law::Model],
         ControllerChoice::Pi => &[Law::Pi],
         ControllerChoice::Both => &[Law::Model, Law::Pi],

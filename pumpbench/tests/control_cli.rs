@@ -584,6 +584,76 @@ fn the_speed_cap_only_guards_a_trip_and_leads_nothing() {
     assert_neither_law_tripped(&ok(&out, "control"));
 }
 
+/// `--plant-stdio` chooses its law with `--controller` (register 14 before the first frame:
+/// `model` by default, `pi`; `both` refused, a plant runs one session) and takes `--set`
+/// writes before the first frame, a refused one an error with nothing served.
+#[test]
+fn plant_stdio_takes_the_law_and_commissioning_writes() {
+    use std::io::Write;
+    use std::process::{Command, Stdio};
+    let bin = env!("CARGO_BIN_EXE_pumpbench");
+    // 2 mca and 10 l/s on the transmitters' codes, the drive at 1 300 rpm and 40 %.
+    let mut session = String::from("H 1\nW 8 3000\nW 1 3\n");
+    for _ in 0..200 {
+        session.push_str("S 1340 1737 1300 40\n");
+    }
+    session.push_str("Q\n");
+    let serve = |args: &[&str]| {
+        let mut child = Command::new(bin)
+            .args(["control", "--plant-stdio"])
+            .args(args)
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        // A refused start closes its input early: a broken pipe here is its answer.
+        let _ = child.stdin.take().unwrap().write_all(session.as_bytes());
+        child.wait_with_output().unwrap()
+    };
+    let replies = |args: &[&str]| {
+        let out = serve(args);
+        assert!(
+            out.status.success(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let text = String::from_utf8(out.stdout).unwrap();
+        assert_eq!(text.lines().count(), 204, "{args:?}");
+        text
+    };
+    let default = replies(&[]);
+    assert_eq!(default, replies(&["--controller", "model"]));
+    let pi = replies(&["--controller", "pi"]);
+    assert_ne!(default, pi, "the PI alone's torques are its own");
+    assert_eq!(
+        pi,
+        replies(&["--set", "14=1"]),
+        "register 14 = 1 is the PI alone"
+    );
+    assert_ne!(
+        default,
+        replies(&["--set", "20=800"]),
+        "a static head written changes the model law's torques"
+    );
+    let out = serve(&["--controller", "both"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(
+        out.stdout.is_empty() && err.contains("--controller model"),
+        "{err}"
+    );
+    for bad in ["99=1", "11=20000"] {
+        let out = serve(&["--set", bad]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{err}");
+        assert!(
+            out.stdout.is_empty() && err.contains(&format!("--set {bad}: the controller refused")),
+            "{err}"
+        );
+    }
+}
+
 /// `--plant-stdio` with an option of the built-in plant or scenario: refused (exit code 2,
 /// nothing served), not silently ignored (a plant option once ran the external plant with
 /// nothing said).

@@ -60,6 +60,7 @@ pub fn plant_stdio() -> Result {
     board_common::serve_plant(
         std::io::stdin().lock(),
         &mut std::io::stdout().lock(),
+        &[],
         |_, _| {},
     )
 }

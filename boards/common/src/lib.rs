@@ -138,19 +138,29 @@ pub fn plant_session() -> Result<(Controller, controller::plant::PlantSession), 
     Ok((core, controller::plant::PlantSession::new(lockstep)))
 }
 
-/// Serves the plant protocol ([`controller::plant`]) on a byte stream: every byte of `input`
-/// fed to a fresh [`plant_session`], each reply written to `output` and flushed at once (the
-/// plant waits for it), until `Q` or the end of the input; `each` sees every controller step's
-/// outputs and published values. What `cargo xtask plant-stdio` and `pumpbench control --plant-stdio` run on their
-/// standard input and output (feature `std`).
+/// Serves the plant protocol ([`controller::plant`]) on a byte stream: a fresh
+/// [`plant_session`], its holding registers first written with `writes` (register, value: as
+/// commissioning or a `W` line would, before the first frame; a write the map refuses is an
+/// error, nothing served), then every byte of `input` fed to it, each reply written to
+/// `output` and flushed at once (the plant waits for it), until `Q` or the end of the input;
+/// `each` sees every controller step's outputs and published values. What `cargo xtask
+/// plant-stdio` and `pumpbench control --plant-stdio` run on their standard input and output
+/// (feature `std`).
 #[cfg(feature = "std")]
 pub fn serve_plant(
     input: impl std::io::BufRead,
     output: &mut impl std::io::Write,
+    writes: &[(u16, u16)],
     mut each: impl FnMut(&controller::control::Outputs, &controller::types::Published),
 ) -> Result<(), std::string::String> {
     let (mut core, mut session) =
         plant_session().map_err(|e| std::format!("plant session: {e}"))?;
+    for &(register, value) in writes {
+        session
+            .lockstep_mut()
+            .write(register, &[value])
+            .map_err(|e| std::format!("holding register {register} = {value} refused: {e:?}"))?;
+    }
     let mut reply = std::string::String::new();
     for byte in input.bytes() {
         let byte = byte.map_err(|e| std::format!("plant input: {e}"))?;
