@@ -508,12 +508,17 @@ impl<T: Real> Monitor<T> {
             l.latched,
         );
 
-        // Model residual: the innovations' normalised squares, averaged.
+        // Model residual: the innovations' normalised squares, averaged; a drive's speed the
+        // observer refused as impossible (out of range, or contradicted by the pressure
+        // read) counts at the cap: a reading that the model cannot take.
         let mut nis = T::ZERO;
         for i in [e.pressure, e.flow, e.speed] {
             if matches!(i.used, Use::Used | Use::Rejected) && i.nis.is_finite() {
                 nis = nis.max(i.nis.min(c.residual_nis_cap));
             }
+        }
+        if e.speed.used == Use::Implausible {
+            nis = c.residual_nis_cap;
         }
         if dt > T::ZERO && c.residual_tau_s > T::ZERO {
             let a = (dt / c.residual_tau_s).min(T::ONE);

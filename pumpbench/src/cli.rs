@@ -129,7 +129,8 @@ pub enum Command {
     /// 35 s; flow transmitter 150 ms unless --flow-lag-ms), flow-meter-lost (12 l/s, the flow
     /// meter fails at 2 s, then the valve steps at 7, 12, 17, 22 s), link-cut (3 mca, the VFD
     /// link cut from 2 to 4 s). Or a CSV file: `t_s,mode,setpoint,valve` and optionally
-    /// `flow_meter`, `pressure_meter`, `link` (1 ok, 0 failed / cut); each row from its time
+    /// `flow_meter`, `pressure_meter`, `link` (1 ok, 0 failed / cut), `speed_reading` (1 ok,
+    /// 0 the drive's speed reading stuck at 0 rpm), `static_head`; each row from its time
     /// on (the first at 0); setpoint in mca (mode 3), l/s (mode 4), % torque (mode 1); valve
     /// = k2 over the paper's (0.2..5).
     Control(ControlArgs),

@@ -16,8 +16,9 @@
 //!
 //! # Scenario
 //! A CSV with the header `t_s,mode,setpoint,valve` and the optional columns `flow_meter`,
-//! `pressure_meter` (1 works, 0 failed: its loop reads 2 mA, an NE 43 fault) and `link` (1
-//! up, 0 cut: no drive readings, the controller applies 0 %). Each row applies from its time
+//! `pressure_meter` (1 works, 0 failed: its loop reads 2 mA, an NE 43 fault), `link` (1
+//! up, 0 cut: no drive readings, the controller applies 0 %) and `speed_reading` (1 the
+//! drive reports its speed, 0 its speed reading stuck at 0 rpm, the torque still read). Each row applies from its time
 //! on (at the first frame at or after it, a multiple of 5 ms); times strictly increasing, the
 //! first 0. `mode`: 0 stop, 1 manual torque, 2 excitation profile, 3 pressure, 4 flow;
 //! `setpoint`: mca in mode 3 (0..=65.535, holding register 8 in 0.001 mca), l/s in mode 4
@@ -344,7 +345,13 @@ fn setpoint_range(mode: u16) -> Option<(f64, &'static str)> {
 /// Errors name the file, the line and the column.
 pub fn read_scenario(path: &Path, hold_s: f64) -> Result<Scenario, InputError> {
     let names = ["t_s", "mode", "setpoint", "valve"];
-    let optional = ["flow_meter", "pressure_meter", "link", "static_head"];
+    let optional = [
+        "flow_meter",
+        "pressure_meter",
+        "link",
+        "static_head",
+        "speed_reading",
+    ];
     let mut rows: Vec<Row> = Vec::new();
     let err = |line: u64, c: usize, name: &str, message: String| InputError {
         path: path.to_path_buf(),
@@ -486,6 +493,7 @@ pub fn read_scenario(path: &Path, hold_s: f64) -> Result<Scenario, InputError> {
             flow_meter: flag(4, "flow_meter")?,
             pressure_meter: flag(5, "pressure_meter")?,
             link: flag(6, "link")?,
+            speed_reading: flag(8, "speed_reading")?,
         };
         let max = f64::from(controller::control::STATIC_HEAD_MAX_MCA);
         let static_head_mca = match number(7, "static_head")? {
@@ -1059,6 +1067,16 @@ fn describe_change(p: &Row, r: &Row) -> String {
     if p.sensors.pressure_meter != r.sensors.pressure_meter {
         parts.push(s(r.sensors.pressure_meter, "pressure meter"));
     }
+    if p.sensors.speed_reading != r.sensors.speed_reading {
+        parts.push(
+            if r.sensors.speed_reading {
+                "drive's speed reading restored"
+            } else {
+                "drive's speed reading stuck at 0 rpm"
+            }
+            .into(),
+        );
+    }
     if p.sensors.link != r.sensors.link {
         parts.push(format!(
             "VFD link {}",
@@ -1384,7 +1402,7 @@ pub fn report(
 
 /// The CSV's header.
 pub const COLUMNS: &str = "law,t_s,mode,setpoint,valve,flow_meter,pressure_meter,link,\
-pressure_true,flow_true,speed_true,k2_true,pressure_measured,flow_measured,active_setpoint,\
+speed_reading,pressure_true,flow_true,speed_true,k2_true,pressure_measured,flow_measured,active_setpoint,\
 control_error,torque_ref_pct,feedforward_pct,integral_pct,status,observer_k2";
 
 /// Writes the runs' samples, one row per period: the law (0 model, 1 pi), the time, the
@@ -1415,7 +1433,7 @@ pub fn write_csv(
             };
             writeln!(
                 w,
-                "{},{:.3},{},{},{},{},{},{},{truth},{:.5},{:.4},{:.5},{:.5},{:.3},{:.3},{:.3},{},{:.5}",
+                "{},{:.3},{},{},{},{},{},{},{},{truth},{:.5},{:.4},{:.5},{:.5},{:.3},{:.3},{:.3},{},{:.5}",
                 trace.law.register(),
                 s.t_s,
                 s.mode,
@@ -1424,6 +1442,7 @@ pub fn write_csv(
                 u8::from(r.sensors.flow_meter),
                 u8::from(r.sensors.pressure_meter),
                 u8::from(r.sensors.link),
+                u8::from(r.sensors.speed_reading),
                 p.pressure_mca,
                 p.flow_lps,
                 p.active_setpoint,

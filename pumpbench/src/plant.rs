@@ -567,6 +567,9 @@ pub struct SensorState {
     pub flow_meter: bool,
     /// The VFD link is up (else the frame has no drive readings).
     pub link: bool,
+    /// The drive reports its speed (else its speed reading is stuck at 0 rpm: a drive whose
+    /// speed register is not mapped, or a plant that sends none; its torque still read).
+    pub speed_reading: bool,
 }
 
 impl SensorState {
@@ -575,6 +578,7 @@ impl SensorState {
         pressure_meter: true,
         flow_meter: true,
         link: true,
+        speed_reading: true,
     };
 }
 
@@ -807,7 +811,11 @@ impl Plant {
             pressure_code: code(&PRESSURE_LOOP, self.sensors.pressure_meter, pressure),
             flow_code: code(&FLOW_LOOP, self.sensors.flow_meter, flow),
             drive: self.sensors.link.then_some(VfdReadings {
-                speed_rpm: speed as f32,
+                speed_rpm: if self.sensors.speed_reading {
+                    speed as f32
+                } else {
+                    0.0
+                },
                 torque_pct: torque_pct as f32,
                 status: 0,
             }),
@@ -1029,8 +1037,8 @@ mod tests {
         let mut b = a.clone();
         b.set_sensors(SensorState {
             flow_meter: false,
-            pressure_meter: true,
             link: false,
+            ..SensorState::OK
         });
         let (fa, fb) = (a.frame(), b.frame());
         assert_eq!(fb.flow_code, FLOW_LOOP.code(FAULT_MA));

@@ -41,7 +41,9 @@
 //!
 //! A measurement that is not finite or is physically implausible (pressure below
 //! min(−c, 0) − 0.5 mca or above 60 mca, flow below −0.5 l/s or above 60 l/s, speed below −50 or above 4000
-//! rpm: a transmitter at 2 mA, a NaN) is not used. An innovation whose normalised square
+//! rpm: a transmitter at 2 mA, a NaN) is not used, nor is a drive's speed at which the pump
+//! cannot make the pressure read with it (its head at no flow there, at the largest head
+//! scale, [`SPEED_HEAD_MARGIN_MCA`] under the reading: a speed reading stuck at 0). An innovation whose normalised square
 //! exceeds [`ObserverConfig::gate_sigma`]² is rejected as an outlier, unless the channel has
 //! been rejected [`ObserverConfig::max_rejections`] times in a row: then the change is taken
 //! as real (the valve moved) and, for pressure and flow, k2's variance is raised by
@@ -58,7 +60,7 @@
 //! (the flow, the speed's rate, the transition matrix, the mean's integration) and
 //! `estimate` the derived outputs and their standard deviations.
 
-use crate::equations::{electromagnetic_torque_pct, valve_pressure_partials};
+use crate::equations::{electromagnetic_torque_pct, valve_pressure_partials, CubicInFlow};
 use crate::scalar::Real;
 use crate::units::applied_torque_pct;
 
@@ -96,6 +98,12 @@ pub const FLOW_LAGGED: usize = 5;
 /// Largest relative move of k2 in one measurement update (see [`Observer::step`]'s
 /// updates: a trust region for the linearisation).
 pub const MAX_K2_MOVE: f64 = 0.15;
+/// How far over the most the pump can give at the drive's speed a pressure reading must be
+/// for that speed to be taken as wrong, mca ([`Observer::step`]: the speed is then not used):
+/// the pressure channel's own margin under its plausible range.
+pub const SPEED_HEAD_MARGIN_MCA: f64 = 0.5;
+/// The highest pressure reading the observer takes, mca (module docs, Robustness).
+const PRESSURE_MAX_MCA: f64 = 60.0;
 /// Longest sub-step of the mean's integration, s.
 pub const MAX_SUBSTEP_S: f64 = 0.05;
 /// Longest `dt` of one [`Observer::step`], s (the error message repeats it).
@@ -316,11 +324,16 @@ impl<T: Real> Observer<T> {
             self.flow_tau_sd_s,
             self.flow_rate,
         );
-        self.decide_holds(dt_s, m);
+        let speed_ok = !self.speed_contradicted(m);
+        self.decide_holds(dt_s, m, speed_ok);
         self.predict(dt_s, applied_torque_pct(torque_ref_pct));
         let pressure = self.update_pressure(m.pressure_mca);
         let flow = self.update_flow(m.flow_lps);
-        let speed = self.update_speed(m.speed_rpm);
+        let speed = if speed_ok {
+            self.update_speed(m.speed_rpm)
+        } else {
+            Innovation::none(Use::Implausible)
+        };
         self.bound();
         let h = self.hydraulics(&self.x.clone());
         // The updates moved the state, so the balance's root: the flow through the water
@@ -356,7 +369,7 @@ impl<T: Real> Observer<T> {
     /// months. So while flow or speed is lost both scales are held at what the full set
     /// taught, and while pressure is lost the head scale is; k2 stays free and tracks the
     /// valve from what remains. Released as soon as the channel is back.
-    fn decide_holds(&mut self, dt: T, m: &Measurements<T>) {
+    fn decide_holds(&mut self, dt: T, m: &Measurements<T>, speed_ok: bool) {
         let plausible = |ch: usize, y: Option<T>| {
             let (lo, hi) = self.plausible_range(ch);
             y.is_some_and(|v| v.is_finite() && v >= lo && v <= hi)
@@ -364,7 +377,7 @@ impl<T: Real> Observer<T> {
         let present = [
             plausible(0, m.pressure_mca),
             plausible(1, m.flow_lps),
-            plausible(2, m.speed_rpm),
+            speed_ok && plausible(2, m.speed_rpm),
         ];
         // silent_s counts up while a channel is away and, once it is lost, down while it is
         // back: the scales stay held until it has been back as long as it takes to be lost,
@@ -397,11 +410,39 @@ impl<T: Real> Observer<T> {
             // outlet transmitter before the check valve reads the pump's head under it.
             0 => (
                 (-self.cfg.params.static_head_c_mca).min(T::ZERO) - T::from_f64(0.5),
-                T::from_f64(60.0),
+                T::from_f64(PRESSURE_MAX_MCA),
             ),
             1 => (T::from_f64(-0.5), T::from_f64(60.0)),
             _ => (T::from_f64(-50.0), T::from_f64(4000.0)),
         }
+    }
+
+    /// Whether the drive's speed `m.speed_rpm` is one at which the pump cannot make the
+    /// pressure `m.pressure_mca` read with it: over the pump's head at no flow at that speed
+    /// (its largest, the head falling with the flow) at the largest head scale
+    /// ([`ObserverConfig::scale_range`]), or over the static head a check valve holds, by
+    /// more than [`SPEED_HEAD_MARGIN_MCA`]. Such a reading is not used (a drive's speed stuck
+    /// at 0 rpm under a pump holding 3 mca, taken as real after five rejections, set the
+    /// model law swinging 1.3..3.8 mca where the PI alone held). Not judged without a plausible
+    /// pressure.
+    fn speed_contradicted(&self, m: &Measurements<T>) -> bool {
+        let (Some(w), Some(p)) = (m.speed_rpm, m.pressure_mca) else {
+            return false;
+        };
+        // Judged only under half the speed the observer holds (a NaN is not: the range check
+        // refuses it): the pump's head grows with the square of its speed, so over that no
+        // reading contradicts a pressure the observer's speed explains, and the check stays
+        // off the observer's usual step (its cost is the 1 ms tick's worst case).
+        if !(w < T::from_f64(0.5) * self.x[SPEED]) {
+            return false;
+        }
+        let par = &self.cfg.params;
+        // The head at no flow: the cubic's constant term alone (its other terms are not
+        // computed). A NaN pressure fails the comparison; a pressure over its plausible range
+        // is not judged (the transmitter's, not the speed's).
+        let shutoff = CubicInFlow::from_poly(&par.alpha, w.max(T::ZERO)).c0;
+        let most = (self.cfg.scale_range.1 * shutoff).max(-par.static_head_c_mca);
+        p > most + T::from_f64(SPEED_HEAD_MARGIN_MCA) && p <= T::from_f64(PRESSURE_MAX_MCA)
     }
 
     /// States held in the last step, indices as [`SPEED`], [`K2`], …: both curve scales while

@@ -113,6 +113,49 @@ fn a_transmitter_at_2_ma_is_not_used() {
     assert!(flow < 1.0 && k2 < 1.0);
 }
 
+/// The drive's speed reading stuck at 0 rpm for 20 s of the paper's pulses: wherever the
+/// pump makes more pressure than it can at 0 rpm, the reading is not used (`Implausible`),
+/// and the speed, flow and k2 stay right from the transmitters; on the same record whole,
+/// every speed reading is judged possible (a real speed never is refused: the pulses stop
+/// and start the pump).
+#[test]
+fn a_speed_reading_stuck_at_zero_is_not_used() {
+    let rows = record(6, 80.0, 0.03, &[]);
+    let mut o = Observer::<f64>::new(ObserverConfig::paper(), 20.0).unwrap();
+    let mut clean = Observer::<f64>::new(ObserverConfig::paper(), 20.0).unwrap();
+    let (mut refused, mut pumping) = (0u32, 0u32);
+    let mut sum: [f64; 3] = [0.0; 3];
+    for (i, r) in rows.iter().enumerate() {
+        let stuck = (30.0..50.0).contains(&r.t_s);
+        let m = Measurements {
+            pressure_mca: Some(r.p_meas),
+            flow_lps: (i % 2 == 1).then_some(r.q_meas),
+            speed_rpm: Some(if stuck { 0.0 } else { r.w_meas }),
+        };
+        let e = o.step(0.05, r.torque_pct, &m).unwrap();
+        let whole = Measurements {
+            speed_rpm: Some(r.w_meas),
+            ..m
+        };
+        let c = clean.step(0.05, r.torque_pct, &whole).unwrap();
+        assert_ne!(c.speed.used, Use::Implausible, "{} s: a real speed", r.t_s);
+        if stuck && r.p_meas > 1.0 {
+            pumping += 1;
+            refused += u32::from(e.speed.used == Use::Implausible);
+            sum[0] += (e.speed_rpm / r.speed - 1.0).abs();
+            sum[1] += (e.flow_lps / r.flow - 1.0).abs();
+            sum[2] += (e.valve_k2 / r.k2 - 1.0).abs();
+        }
+    }
+    let mape = sum.map(|s| 100.0 * s / f64::from(pumping));
+    println!(
+        "speed stuck at 0 for 20 s: {refused} of {pumping} readings refused; MAPE speed {:.2} %, flow {:.2} %, k2 {:.2} %",
+        mape[0], mape[1], mape[2]
+    );
+    assert!(pumping > 100 && refused == pumping);
+    assert!(mape.iter().all(|&m| m < 1.0), "{mape:?}");
+}
+
 fn channel() -> impl Strategy<Value = Option<f64>> {
     prop_oneof![
         3 => Just(None),
