@@ -117,12 +117,13 @@ fn a_transmitter_at_2_ma_is_not_used() {
 /// pump makes more pressure than it can at 0 rpm, the reading is not used (`Implausible`),
 /// and the speed, flow and k2 stay right from the transmitters; on the same record whole,
 /// every speed reading is judged possible (a real speed never is refused: the pulses stop
-/// and start the pump).
+/// and start the pump), and so is a speed stuck at 1 rpm (only an exact 0 is judged).
 #[test]
 fn a_speed_reading_stuck_at_zero_is_not_used() {
     let rows = record(6, 80.0, 0.03, &[]);
     let mut o = Observer::<f64>::new(ObserverConfig::paper(), 20.0).unwrap();
     let mut clean = Observer::<f64>::new(ObserverConfig::paper(), 20.0).unwrap();
+    let mut at_one = Observer::<f64>::new(ObserverConfig::paper(), 20.0).unwrap();
     let (mut refused, mut pumping) = (0u32, 0u32);
     let mut sum: [f64; 3] = [0.0; 3];
     for (i, r) in rows.iter().enumerate() {
@@ -139,6 +140,17 @@ fn a_speed_reading_stuck_at_zero_is_not_used() {
         };
         let c = clean.step(0.05, r.torque_pct, &whole).unwrap();
         assert_ne!(c.speed.used, Use::Implausible, "{} s: a real speed", r.t_s);
+        let one = Measurements {
+            speed_rpm: Some(if stuck { 1.0 } else { r.w_meas }),
+            ..m
+        };
+        let s = at_one.step(0.05, r.torque_pct, &one).unwrap();
+        assert_ne!(
+            s.speed.used,
+            Use::Implausible,
+            "{} s: 1 rpm is judged by the gate",
+            r.t_s
+        );
         if stuck && r.p_meas > 1.0 {
             pumping += 1;
             refused += u32::from(e.speed.used == Use::Implausible);
