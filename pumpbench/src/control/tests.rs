@@ -283,6 +283,19 @@ fn the_built_in_scenarios_are_well_formed() {
 }
 
 /// `text` written to a temporary scenario file and read.
+/// The model law's run of `s` on the built-in plant `o`, with the holding-register writes
+/// `settings` before it, and its figures.
+fn model_run(
+    o: &PlantOptions,
+    s: &Scenario,
+    settings: &[(u16, u16)],
+) -> (Trace, Vec<EventFigures>) {
+    let (mut plant, u0) = built_in_plant(o, s).unwrap();
+    let trace = run(&mut plant, s, Law::Model, u0, settings, || {}).unwrap();
+    let f = figures(&trace, s);
+    (trace, f)
+}
+
 fn read(text: &str) -> Result<Scenario, InputError> {
     let dir = tempfile::tempdir().unwrap();
     let p = dir.path().join("s.csv");
@@ -418,9 +431,7 @@ fn a_static_head_corrected_under_the_setpoint_moves_no_pressure() {
         static_head_mca: 0.0,
         ..PlantOptions::with_seed(1)
     };
-    let (mut plant, u0) = built_in_plant(&o, &s).unwrap();
-    let trace = run(&mut plant, &s, Law::Model, u0, &[], || {}).unwrap();
-    let f = figures(&trace, &s);
+    let (trace, f) = model_run(&o, &s, &[]);
     let peak = f[1].peak_pct.unwrap();
     eprintln!(
         "peak after the correction {peak:.3} %, static head {} mca",
@@ -438,10 +449,7 @@ fn a_static_head_corrected_under_the_setpoint_moves_no_pressure() {
 #[test]
 fn a_setpoint_lowered_into_reach_under_a_low_torque_limit_is_met_from_the_limit() {
     let s = read("t_s,mode,setpoint,valve\n0,3,3,1\n8,3,1.5,1\n").unwrap();
-    let o = PlantOptions::with_seed(1);
-    let (mut plant, u0) = built_in_plant(&o, &s).unwrap();
-    let trace = run(&mut plant, &s, Law::Model, u0, &[(11, 3000)], || {}).unwrap();
-    let f = figures(&trace, &s);
+    let (_, f) = model_run(&PlantOptions::with_seed(1), &s, &[(11, 3000)]);
     let (over, settle) = (f[1].overshoot_pct.unwrap(), f[1].settle_s.unwrap());
     eprintln!("3 -> 1.5 mca from the limit: overshoot {over:.3} %, settle {settle:.3} s");
     assert!(over < 5.0, "{over} %");
@@ -457,10 +465,7 @@ fn a_setpoint_lowered_into_reach_under_a_low_torque_limit_is_met_from_the_limit(
 #[test]
 fn a_drive_speed_stuck_at_zero_does_not_move_the_pressure() {
     let s = read("t_s,mode,setpoint,valve,speed_reading\n0,3,3,1,1\n2,3,3,1,0\n").unwrap();
-    let o = PlantOptions::with_seed(1);
-    let (mut plant, u0) = built_in_plant(&o, &s).unwrap();
-    let trace = run(&mut plant, &s, Law::Model, u0, &[], || {}).unwrap();
-    let f = figures(&trace, &s);
+    let (trace, f) = model_run(&PlantOptions::with_seed(1), &s, &[]);
     let peak = f[1].peak_pct.unwrap();
     // Not silent: the observer's refusals raise the model-residual alarm (status bit 1, any
     // alarm) within seconds.
@@ -593,9 +598,7 @@ fn a_lift_is_learnt_from_a_step_or_told_to_register_20() {
         ..PlantOptions::with_seed(3)
     };
     let overshoot = |settings: &[(u16, u16)]| {
-        let (mut plant, u0) = built_in_plant(&o, &scenario).unwrap();
-        let trace = run(&mut plant, &scenario, Law::Model, u0, settings, || {}).unwrap();
-        let f = figures(&trace, &scenario);
+        let (trace, f) = model_run(&o, &scenario, settings);
         (
             [f[1].overshoot_pct.unwrap(), f[3].overshoot_pct.unwrap()],
             trace.static_head_mca,
