@@ -166,7 +166,7 @@ pub struct ControlArgs {
         "scenario", "targets", "output", "plot", "seed", "hold_s",
         "flow_lag_ms", "curve_error", "curve_shape", "water_inertia", "drive_lag_ms", "rotor_inertia",
         "pressure_lag_ms", "speed_lag_ms", "static_head", "flow_update_ms",
-        "drive_slew_pct_s", "transmitter_delay_ms",
+        "drive_slew_pct_s", "transmitter_delay_ms", "pressure_noise",
     ])]
     pub plant_stdio: bool,
     /// The law(s) to run. Default: `both` on the built-in plant, `model` with
@@ -567,6 +567,17 @@ pub struct PlantArgs {
         allow_hyphen_values = true
     )]
     pub pressure_lag_ms: String,
+    /// The pressure transmitter's noise, mca, 1 σ (0..0.5; 0.003: 3 mm of water, the
+    /// default): every reading's, a sum of four uniform draws scaled to it, before the 4-20 mA
+    /// loop and the 12-bit ADC. A low setpoint's readings then move by this much around it
+    /// (0.01 mca is 1 % of 1 mca).
+    #[arg(
+        long,
+        value_name = "MCA",
+        default_value = "0.003",
+        allow_hyphen_values = true
+    )]
+    pub pressure_noise: String,
     /// A transport delay ahead of the pressure and flow transmitters' lags, ms (0..1000; 0:
     /// none): a tap or a meter down the pipe, a transmitter that samples and filters
     /// digitally, a reading over a fieldbus. The drive's readings are not delayed.

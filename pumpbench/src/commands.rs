@@ -212,6 +212,8 @@ pub fn plant_options(
         flow_lag_s: plant::parse_lag_ms("--flow-lag-ms", flow_lag_ms).map_err(Failure::usage)?,
         pressure_lag_s: plant::parse_lag_ms("--pressure-lag-ms", &a.pressure_lag_ms)
             .map_err(Failure::usage)?,
+        pressure_noise_mca: plant::parse_pressure_noise(&a.pressure_noise)
+            .map_err(Failure::usage)?,
         speed_lag_s: plant::parse_lag_ms("--speed-lag-ms", &a.speed_lag_ms)
             .map_err(Failure::usage)?,
         flow_update_s: plant::parse_lag_ms("--flow-update-ms", &a.flow_update_ms)

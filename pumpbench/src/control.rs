@@ -1653,6 +1653,9 @@ fn rarer_plant_text(o: &PlantOptions) -> String {
     if o.dynamics.drive_slew_pct_s > 0.0 {
         t += &format!(", drive ramp {} %/s", plain(o.dynamics.drive_slew_pct_s));
     }
+    if o.pressure_noise_mca != crate::plant::PRESSURE.noise {
+        t += &format!(", pressure noise {} mca", plain(o.pressure_noise_mca));
+    }
     if o.transmitter_delay_s > 0.0 {
         t += &format!(
             ", transmitter delay {} ms",

@@ -207,6 +207,15 @@ pub fn parse_delay_ms(text: &str) -> Result<f64, String> {
     Ok(in_range("--transmitter-delay-ms", text, (0.0, DELAY_MAX_MS), " ms")? / 1000.0)
 }
 
+/// The range of `--pressure-noise`, mca (1 σ): up to 5 % of the transmitter's 10 mca span.
+pub const PRESSURE_NOISE_RANGE_MCA: (f64, f64) = (0.0, 0.5);
+
+/// `--pressure-noise MCA`: the pressure transmitter's noise, mca (1 σ), within
+/// [`PRESSURE_NOISE_RANGE_MCA`].
+pub fn parse_pressure_noise(text: &str) -> Result<f64, String> {
+    in_range("--pressure-noise", text, PRESSURE_NOISE_RANGE_MCA, " mca")
+}
+
 impl Dynamics {
     /// The paper's model: flow algebraic, torque at once.
     pub const NONE: Self = Self {
@@ -475,6 +484,8 @@ pub struct PlantOptions {
     pub flow_lag_s: f64,
     /// Pressure transmitter lag, s.
     pub pressure_lag_s: f64,
+    /// The pressure transmitter's noise, mca (1 σ; [`PRESSURE`]'s 0.003 by default).
+    pub pressure_noise_mca: f64,
     /// The drive's speed reading's first-order lag, s (0: the rotor's speed as it is; a
     /// drive's filtered speed estimate lags it).
     pub speed_lag_s: f64,
@@ -514,6 +525,7 @@ impl PlantOptions {
             rotor_inertia: 1.0,
             flow_lag_s: FLOW.tau_s,
             pressure_lag_s: PRESSURE.tau_s,
+            pressure_noise_mca: PRESSURE.noise,
             speed_lag_s: SPEED.tau_s,
             flow_update_s: 0.0,
             static_head_mca: -PAPER_C_MCA,
@@ -636,6 +648,7 @@ impl Plant {
             dynamics: o.dynamics,
             pressure: Transmitter {
                 tau_s: o.pressure_lag_s,
+                noise: o.pressure_noise_mca,
                 ..PRESSURE
             },
             flow: Transmitter {

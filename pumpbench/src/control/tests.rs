@@ -623,6 +623,37 @@ fn a_lift_is_learnt_from_a_step_or_told_to_register_20() {
     );
 }
 
+/// A lift is learnt behind a noisy pressure transmitter: 0.01 mca (1 σ, `--pressure-noise`),
+/// 1 % of the 1 mca setpoint, took single readings off the settled point's 2 % band every
+/// few periods, and the lift stayed at the paper's −0.252 mca; the means over each half of
+/// the settling take it (`controller::control::LIFT_SETTLED_PERIODS`), and the last step
+/// (1 → 3 mca, after the pairs 2 → 4 and 4 → 1) rises as with the lift told.
+#[test]
+fn a_lift_is_learnt_behind_a_noisy_pressure_transmitter() {
+    let s = built_in("pressure-steps").unwrap();
+    let o = PlantOptions {
+        static_head_mca: 0.5,
+        pressure_noise_mca: 0.01,
+        ..PlantOptions::with_seed(1)
+    };
+    let (learnt, f) = model_run(&o, &s, &[]);
+    let (told, g) = model_run(&o, &s, &[(20, 500)]);
+    let rise = |f: &[EventFigures]| f[3].rise_s.unwrap();
+    eprintln!(
+        "static head learnt {} mca; 1 -> 3 mca rise learnt {} s, told {} s",
+        learnt.static_head_mca,
+        rise(&f),
+        rise(&g)
+    );
+    assert!(
+        (learnt.static_head_mca - 0.5).abs() < 0.05,
+        "{}",
+        learnt.static_head_mca
+    );
+    assert_eq!(told.static_head_mca, 0.5);
+    assert!(rise(&f) < 1.1 * rise(&g), "{} {}", rise(&f), rise(&g));
+}
+
 /// A lag of 0 is printed with what it means (no setpoint step showed one), not as a plant
 /// without lag; a measured lag alone.
 #[test]
