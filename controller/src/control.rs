@@ -129,8 +129,8 @@ pub const LIFT_C_RANGE: (f32, f32) = (-STATIC_HEAD_MAX_MCA, 1.0);
 pub const LIFT_AGREEMENT_MCA: f32 = 0.1;
 /// How far a pair's static head must be from the one held to be taken, mca: single readings
 /// put the pairs within ±0.015 mca of the paper's bench's c (the means closer), and within
-/// it nothing changes
-/// (a lift under ≈ 0.35 mca is not learnt; it moves the loops' figures little).
+/// it nothing changes (a lift under ≈ 0.35 mca is not learnt; it moves the loops' figures
+/// little).
 pub const LIFT_DEAD_BAND_MCA: f32 = 0.1;
 
 /// Learns the system's static head c (eq. (8) at the pressure transmitter: `p = k2² Q² − c`)
@@ -157,8 +157,8 @@ struct LiftProbe {
     /// Since the last check, the sums of the pressure (mca) and the flow squared ((l/s)²).
     sums: (f32, f32),
     /// The pressure (mca) and the flow squared ((l/s)²) averaged over the half before the
-    /// last check (NaN at the first after a setpoint's change or a jump: the second check,
-    /// half a settling later, is the first that can hold).
+    /// last check (NaN at the first after a setpoint's change: the second check, half a
+    /// settling later, is the first that can hold).
     mid: (f32, f32),
     /// The last settled point: its pressure and flow squared (NaN: none).
     anchor: (f32, f32),
@@ -181,9 +181,9 @@ impl LiftProbe {
     /// One control period at `now_ms` and `setpoint`, with the readings `p` (mca) and `q`
     /// (l/s), `off` the setpoint less the controlled reading: the static head c (mca) a pair
     /// of settled points gives, once, as the loop settles at a setpoint other than the last
-    /// settled point's. Every half of
-    /// [`LIFT_SETTLED_PERIODS`] at one setpoint the readings' means over it are checked
-    /// against the last half's, and taken as the anchor while they hold.
+    /// settled point's. Every half of [`LIFT_SETTLED_PERIODS`] at one setpoint the readings'
+    /// means over it are checked against the last half's, and taken as the anchor while
+    /// they hold.
     #[inline(never)]
     fn period(&mut self, now_ms: u32, setpoint: f32, off: f32, p: f32, q: f32) -> Option<f32> {
         const HALF: u8 = (LIFT_SETTLED_PERIODS / 2) as u8;
@@ -198,10 +198,7 @@ impl LiftProbe {
         // after it is confirmed afresh). (A review: pairs with a point 16 s old, or from
         // before a valve's step, learnt lifts of 1.3..1.7 mca on a bench with none.) (The
         // anchor's pressure NaN: no pair with it; no reading since the check: it holds.)
-        let k = f32::from(self.settled);
-        let left = (self.sums.0 - k * self.anchor.0).abs() > LIFT_STEADY_FRACTION * self.sums.0
-            || (self.sums.1 - k * self.anchor.1).abs() > LIFT_STEADY_FRACTION * self.sums.1;
-        if gap || (moved && (left || !self.here)) {
+        if gap || (moved && !(self.here && self.still_at_anchor())) {
             self.anchor.0 = f32::NAN;
         }
         if gap || moved {
@@ -249,6 +246,15 @@ impl LiftProbe {
             && c >= LIFT_C_RANGE.0
             && c <= LIFT_C_RANGE.1)
             .then_some(c)
+    }
+
+    /// Whether the readings since the last check (their sums over `settled` periods) are
+    /// within [`LIFT_STEADY_FRACTION`] of the anchor's, each (none since the check: they
+    /// are; no anchor, NaN: they are not, and it stays none). Called only at a move.
+    fn still_at_anchor(&self) -> bool {
+        let k = f32::from(self.settled);
+        (self.sums.0 - k * self.anchor.0).abs() <= LIFT_STEADY_FRACTION * self.sums.0
+            && (self.sums.1 - k * self.anchor.1).abs() <= LIFT_STEADY_FRACTION * self.sums.1
     }
 
     /// A pair's static head `c` (mca) is taken only when the pair before it gave one within
@@ -1715,8 +1721,9 @@ mod tests {
         settle_at(&mut probe, &mut t, 2.0, lift, 1.0);
         off_band(&mut probe, &mut t, 3.0, 300);
         assert!(settle_at(&mut probe, &mut t, 4.0, lift, 1.0).is_empty());
-        // The valve's step at 2 mca (the readings off the point), a move before the point after it is
-        // confirmed: no pair; confirmed again at the new valve, the pair is of the new valve.
+        // The valve's step at 2 mca (the readings off the point), a move before the point
+        // after it is confirmed: no pair; confirmed again at the new valve, the pair is of
+        // the new valve.
         let (mut probe, mut t) = fresh();
         settle_at(&mut probe, &mut t, 2.0, lift, 1.0);
         off_band(&mut probe, &mut t, 2.0, 20);
@@ -1764,17 +1771,14 @@ mod tests {
         assert_eq!(got, 1);
     }
 
-    /// Noisy readings (the pressure ±3 % of a 1 mca setpoint, uniform: single readings off a
-    /// 2 % band one period in three, which never settled before the means; the flow ±1 %)
-    /// settle, and their means give the static head.
+    /// Noisy readings (the pressure's noise 1.5 % of a 1 mca setpoint, 1 σ, the transmitters'
+    /// noise model: single readings off a 2 % band one period in five, which never settled
+    /// before the means; the flow's 0.5 %) settle, and their means give the static head.
     #[test]
     fn the_lift_probe_settles_through_noise() {
         let (k, c) = (0.0117, -0.5);
-        let mut seed = 12345u32;
-        let mut noise = || {
-            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
-            (seed >> 8) as f32 / (1u32 << 24) as f32 * 2.0 - 1.0
-        };
+        let mut rng = model_core::excitation::SplitMix64::new(12345);
+        let mut noise = || 0.5 * model_core::transmitter::noise(&mut rng);
         let (mut probe, mut t) = (LiftProbe::NEW, 0u32);
         let mut got = Vec::new();
         for setpoint in [1.0f32, 3.0, 1.0] {
